@@ -1,0 +1,24 @@
+// Calibration of one sensor channel, in the model of Zhang & Yang 2015: u = H (raw - B).
+// Fitting comes in calib_core's own issue; applying is the tiny pure function the fusion service calls per
+// sample.
+#pragma once
+
+#include <Eigen/Core>
+
+namespace bsn::calib {
+
+using Vec3 = Eigen::Vector3d;
+using Mat3 = Eigen::Matrix3d;
+
+struct ChannelCalibration {
+  Vec3 bias = Vec3::Zero();           ///< B, in the channel's unit
+  Mat3 transform = Mat3::Identity();  ///< H: scale, misalignment and soft iron
+};
+
+/// u = H (raw - B).
+inline Vec3 apply(const ChannelCalibration& c, const Vec3& raw) { return c.transform * (raw - c.bias); }
+
+/// Gyro bias as the mean rate over a resting recording (rad/s). `rates` holds one sample per column.
+Vec3 gyro_bias_from_rest(const Eigen::Ref<const Eigen::Matrix3Xd>& rates);
+
+}  // namespace bsn::calib

@@ -1,0 +1,50 @@
+// The body model: segments, the node on each, the parent of each and the joint to it. Parsing a file is
+// the services' job; the structure and its rules live here.
+#pragma once
+
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "bsn/fusion/orientation_filter.hpp"
+#include "bsn/fusion/rotation.hpp"
+
+namespace bsn::fusion {
+
+struct SegmentSpec {
+  std::string name;           ///< unique segment name, e.g. "thigh_l"
+  std::string node;           ///< node_id of the sensor on this segment; unique across segments
+  std::string parent;         ///< parent segment name, "" for a root
+  std::string joint;          ///< name of the joint parent -> this segment, e.g. "hip_l"; "" = "<parent>-<name>"
+  AxisSequence joint_axes;    ///< rotation sequence the joint angles are decomposed in (default z-y'-x'')
+  FilterSpec filter;          ///< filter for this segment
+};
+
+struct BodyModel {
+  std::string name;
+  std::vector<SegmentSpec> segments;
+
+  /// Index of a segment by name, or nullopt.
+  std::optional<std::size_t> find_segment(const std::string& name) const;
+  /// Index of the segment carrying a node, or nullopt.
+  std::optional<std::size_t> find_node(const std::string& node) const;
+};
+
+/// What is wrong with a body model, and which segment entry shows it.
+struct BodyModelProblem {
+  std::size_t segment_index = 0;
+  std::string message;
+};
+
+/// Checks the rules: at least one segment; names and nodes non-empty, at most 63 characters and unique;
+/// every parent exists; no parent cycle. Returns the first problem found, or nullopt.
+std::optional<BodyModelProblem> check_body_model(const BodyModel& body);
+
+/// Joint name of a segment: its explicit name, or "<parent>-<child>".
+std::string joint_name(const SegmentSpec& segment);
+
+/// The default 7-segment lower body: pelvis; left and right thigh, shank and foot. Node ids equal segment names.
+BodyModel default_lower_body();
+
+}  // namespace bsn::fusion

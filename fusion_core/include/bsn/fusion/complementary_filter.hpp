@@ -1,0 +1,83 @@
+// A plain complementary filter: strapdown gyro integration, a tilt correction towards the accelerometer
+// and a heading-only correction towards the horizontal magnetic field, each a first-order low-pass with
+// an interpretable time constant. No bias estimation. It is the reference the seed filters must beat.
+#pragma once
+
+#include <string_view>
+
+#include "bsn/fusion/orientation_filter.hpp"
+
+namespace bsn::fusion {
+
+class ComplementaryFilter final : public OrientationFilter {
+ public:
+  struct Params {
+    /// Time constant of the tilt correction towards the accelerometer, s. Larger trusts the gyro longer
+    /// (less sensitive to accelerations), smaller removes gyro drift faster. Default 2 s.
+    double tau_acc_s = 2.0;
+    /// Time constant of the heading correction towards the magnetometer, s. Default 4 s.
+    double tau_mag_s = 4.0;
+    /// A timestamp gap longer than this re-initialises from the accelerometer and magnetometer, s.
+    /// Shorter gaps are bridged by integrating the gyro over the gap. Default 1 s.
+    double max_gap_s = 1.0;
+    /// The accelerometer is skipped when | |acc| - g | exceeds this, m/s^2 (strong external
+    /// acceleration). Default 3 m/s^2.
+    double acc_rejection_m_s2 = 3.0;
+    /// The magnetometer is rejected when its norm differs from the norm at initialisation by more than this
+    /// fraction (a magnetic disturbance). Default 0.2 (20 %).
+    double mag_norm_tolerance = 0.2;
+    /// Rest detection: the sensor is resting when |gyr| stays below rest_gyr_rad_s (default 0.05 rad/s,
+    /// 2.9 deg/s) and | |acc| - g | below rest_acc_m_s2 (default 0.5 m/s^2) for at least rest_min_s
+    /// (default 1.5 s).
+    double rest_gyr_rad_s = 0.05;
+    double rest_acc_m_s2 = 0.5;
+    double rest_min_s = 1.5;
+    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
+    double init_period_s = 3.0;
+  };
+
+  /// Quantities derived once from Params.
+  struct Coefficients {
+    double inv_tau_acc = 0.0;  ///< 1/tau_acc, 1/s; gain per sample is 1 - exp(-dt/tau)
+    double inv_tau_mag = 0.0;  ///< 1/tau_mag, 1/s
+    std::uint64_t max_gap_ns = 0;
+    std::uint64_t rest_min_ns = 0;
+    std::uint64_t init_period_ns = 0;
+  };
+
+  struct State {
+    Quat q = Quat::Identity();     ///< sensor-to-earth
+    bool initialised = false;
+    std::uint64_t last_ns = 0;     ///< timestamp of the last used sample
+    std::uint64_t init_ns = 0;     ///< timestamp of the last (re)initialisation
+    std::uint64_t still_since_ns = 0;  ///< start of the current still period
+    bool still = false;
+    double mag_ref_norm = 0.0;     ///< |mag| at initialisation, uT; 0 = not known yet
+    FilterFlags flags;
+  };
+
+  /// Throws std::invalid_argument on a non-positive or non-finite parameter.
+  explicit ComplementaryFilter(const Params& params);
+  ComplementaryFilter() : ComplementaryFilter(Params{}) {}
+
+  UpdateResult update(const ImuSample& sample) override;
+  Quat orientation() const override { return state_.q; }
+  FilterFlags flags() const override { return state_.flags; }
+  Vec3 gyro_bias() const override { return Vec3::Zero(); }
+  bool initialised() const override { return state_.initialised; }
+  void reset() override { state_ = State{}; }
+  std::string_view name() const override { return "complementary"; }
+
+  const Params& params() const { return params_; }
+  const State& state() const { return state_; }
+
+ private:
+  UpdateResult initialise(const ImuSample& s);
+  void update_rest(const ImuSample& s);
+
+  Params params_;
+  Coefficients coeff_;
+  State state_;
+};
+
+}  // namespace bsn::fusion

@@ -1,0 +1,25 @@
+#pragma once
+
+#include <cstdint>
+
+#include "bsn/fusion/rotation.hpp"
+
+namespace bsn::fusion {
+
+/// One MIMU sample in the sensor frame, SI units (see rotation.hpp for the frames).
+struct ImuSample {
+  std::uint64_t timestamp_ns = 0;  ///< sensor clock, ns; filters take dt from consecutive timestamps
+  Vec3 acc = Vec3::Zero();         ///< specific force, m/s^2 (+g on the up axis at rest)
+  Vec3 gyr = Vec3::Zero();         ///< angular rate, rad/s
+  Vec3 mag = Vec3::Zero();         ///< magnetic field, uT
+  bool has_acc = true;
+  bool has_gyr = true;
+  bool has_mag = true;  ///< false for a sample without magnetometer reading (6D update)
+
+  /// True when every present channel is finite.
+  bool finite() const {
+    return (!has_acc || acc.allFinite()) && (!has_gyr || gyr.allFinite()) && (!has_mag || mag.allFinite());
+  }
+};
+
+}  // namespace bsn::fusion

@@ -1,0 +1,71 @@
+// Conventions of the whole project, in one place:
+//  - earth frame ENU (x east, y magnetic north, z up);
+//  - Hamilton quaternions (w, x, y, z); q is sensor-to-earth: v_E = q * v_S * conj(q);
+//  - Euler angles are intrinsic z-y'-x'' (yaw, pitch, roll) in radians.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace bsn::fusion {
+
+using Vec3 = Eigen::Vector3d;
+using Quat = Eigen::Quaterniond;
+
+/// Standard gravity, m/s^2: the magnitude of the specific force at rest.
+inline constexpr double kGravity = 9.80665;
+
+/// Intrinsic z-y'-x'' angles, radians. yaw in (-pi, pi], pitch in [-pi/2, pi/2], roll in (-pi, pi].
+struct YawPitchRoll {
+  double yaw = 0.0;
+  double pitch = 0.0;
+  double roll = 0.0;
+};
+
+/// Sensor-to-earth quaternion of the intrinsic z-y'-x'' rotation (yaw, then pitch, then roll).
+Quat from_yaw_pitch_roll(const YawPitchRoll& ypr);
+
+/// Inverse of from_yaw_pitch_roll. At pitch = +-90 deg (gimbal lock) roll is set to 0 and yaw takes
+/// the whole rotation about the vertical.
+YawPitchRoll to_yaw_pitch_roll(const Quat& q);
+
+/// An intrinsic Tait-Bryan rotation sequence of three distinct axes, e.g. "zyx" = z, then y', then x''.
+struct AxisSequence {
+  std::array<int, 3> axes{2, 1, 0};  ///< 0 = x, 1 = y, 2 = z
+  std::string name() const;
+};
+
+/// Parses "zyx", "zxy", "xyz", ... (three distinct letters of x, y, z). Returns nullopt otherwise.
+std::optional<AxisSequence> parse_axis_sequence(std::string_view text);
+
+/// Angles (a1, a2, a3) with q = R_{axes[0]}(a1) * R_{axes[1]}(a2) * R_{axes[2]}(a3); the middle angle is in
+/// [-pi/2, pi/2]. At the singularity the third angle is set to 0.
+Vec3 decompose(const Quat& q, const AxisSequence& seq);
+
+/// Composes the rotation of decompose() back into a quaternion.
+Quat compose(const Vec3& angles, const AxisSequence& seq);
+
+/// Relative orientation of a child frame in its parent frame: conj(q_parent) * q_child.
+Quat relative_orientation(const Quat& q_parent, const Quat& q_child);
+
+/// Rotation angle of q_a * conj(q_b) in radians, in [0, pi]: the total orientation error (BROAD's metric).
+double angle_between(const Quat& q_a, const Quat& q_b);
+
+/// Quaternion of the rotation by the rotation vector v (axis * angle, radians).
+Quat exp_rotation_vector(const Vec3& v);
+
+/// Sensor-to-earth orientation whose earth z is along the specific force (up) and whose earth y is along the
+/// horizontal part of the magnetic field (north). Correct for any heading. Requires acc and mag not parallel.
+Quat orientation_from_acc_mag(const Vec3& acc, const Vec3& mag);
+
+/// Sensor-to-earth orientation from the accelerometer alone, with zero yaw (no heading information).
+Quat orientation_from_acc(const Vec3& acc);
+
+/// Returns q with w >= 0 (q and -q are the same rotation), normalised.
+Quat canonical(const Quat& q);
+
+}  // namespace bsn::fusion

@@ -1,0 +1,117 @@
+#include "bsn/fusion/rotation.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace bsn::fusion {
+namespace {
+
+Quat axis_rotation(int axis, double angle) {
+  return Quat(Eigen::AngleAxisd(angle, Vec3::Unit(axis)));
+}
+
+}  // namespace
+
+Quat from_yaw_pitch_roll(const YawPitchRoll& ypr) {
+  return compose(Vec3(ypr.yaw, ypr.pitch, ypr.roll), AxisSequence{});
+}
+
+YawPitchRoll to_yaw_pitch_roll(const Quat& q) {
+  const Vec3 a = decompose(q, AxisSequence{});
+  return {a.x(), a.y(), a.z()};
+}
+
+std::string AxisSequence::name() const {
+  std::string s(3, 'x');
+  for (int i = 0; i < 3; ++i) s[static_cast<std::size_t>(i)] = static_cast<char>('x' + axes[static_cast<std::size_t>(i)]);
+  return s;
+}
+
+std::optional<AxisSequence> parse_axis_sequence(std::string_view text) {
+  if (text.size() != 3) return std::nullopt;
+  AxisSequence seq;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const char c = text[i];
+    if (c < 'x' || c > 'z') return std::nullopt;
+    seq.axes[i] = c - 'x';
+  }
+  if (seq.axes[0] == seq.axes[1] || seq.axes[1] == seq.axes[2] || seq.axes[0] == seq.axes[2]) return std::nullopt;
+  return seq;
+}
+
+// For R = R_i(a) R_j(b) R_k(c) with distinct i, j, k and s = +1 for a cyclic (i, j, k), -1 otherwise:
+//   sin b = s R(i,k),  a = atan2(-s R(j,k), R(k,k)),  c = atan2(-s R(i,j), R(i,i)).
+Vec3 decompose(const Quat& q, const AxisSequence& seq) {
+  const Eigen::Matrix3d r = q.normalized().toRotationMatrix();
+  const int i = seq.axes[0], j = seq.axes[1], k = seq.axes[2];
+  const double s = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
+  const double sb = std::clamp(s * r(i, k), -1.0, 1.0);
+  const double b = std::asin(sb);
+  double a, c;
+  if (std::abs(sb) > 1.0 - 1e-12) {
+    // Gimbal lock: only a +- c is defined. Put it all in the first angle.
+    c = 0.0;
+    const Eigen::Matrix3d rest = r * axis_rotation(j, -b).toRotationMatrix();
+    // At the lock R_j(b) R_k(c) R_j(-b) turns about +-axis i, so rest is a pure rotation about axis i.
+    a = std::atan2(s * rest(k, j), rest(j, j));
+  } else {
+    a = std::atan2(-s * r(j, k), r(k, k));
+    c = std::atan2(-s * r(i, j), r(i, i));
+  }
+  return {a, b, c};
+}
+
+Quat compose(const Vec3& angles, const AxisSequence& seq) {
+  return (axis_rotation(seq.axes[0], angles[0]) * axis_rotation(seq.axes[1], angles[1]) *
+          axis_rotation(seq.axes[2], angles[2]))
+      .normalized();
+}
+
+Quat relative_orientation(const Quat& q_parent, const Quat& q_child) {
+  return (q_parent.conjugate() * q_child).normalized();
+}
+
+double angle_between(const Quat& q_a, const Quat& q_b) {
+  const Quat e = (q_a * q_b.conjugate()).normalized();
+  return 2.0 * std::acos(std::clamp(std::abs(e.w()), 0.0, 1.0));
+}
+
+Quat exp_rotation_vector(const Vec3& v) {
+  const double angle = v.norm();
+  if (angle < 1e-12) {
+    // Second-order series keeps unit norm to machine precision for tiny angles.
+    return Quat(1.0, 0.5 * v.x(), 0.5 * v.y(), 0.5 * v.z()).normalized();
+  }
+  const double s = std::sin(0.5 * angle) / angle;
+  return Quat(std::cos(0.5 * angle), s * v.x(), s * v.y(), s * v.z());
+}
+
+Quat orientation_from_acc_mag(const Vec3& acc, const Vec3& mag) {
+  // Earth axes expressed in the sensor frame: up along acc, east = north x up ... built by cross products.
+  const Vec3 up = acc.normalized();
+  const Vec3 east = mag.cross(up).normalized();
+  const Vec3 north = up.cross(east);
+  Eigen::Matrix3d r_earth_to_sensor;  // columns: earth x, y, z in sensor coordinates
+  r_earth_to_sensor.col(0) = east;
+  r_earth_to_sensor.col(1) = north;
+  r_earth_to_sensor.col(2) = up;
+  // The rows of the sensor-to-earth rotation are the earth axes in sensor coordinates.
+  return canonical(Quat(Eigen::Matrix3d(r_earth_to_sensor.transpose())));
+}
+
+Quat orientation_from_acc(const Vec3& acc) {
+  // Shortest rotation taking the measured up direction to earth z: pitch and roll only, zero yaw component
+  // is then removed by re-composing from the z-y-x angles.
+  const Quat tilt = Quat::FromTwoVectors(acc.normalized(), Vec3::UnitZ());
+  YawPitchRoll ypr = to_yaw_pitch_roll(tilt);
+  ypr.yaw = 0.0;
+  return from_yaw_pitch_roll(ypr);
+}
+
+Quat canonical(const Quat& q) {
+  Quat n = q.normalized();
+  if (n.w() < 0.0) n.coeffs() = -n.coeffs();
+  return n;
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,98 @@
+#include "bsn/fusion/sample_gate.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace bsn::fusion {
+namespace {
+
+constexpr std::string_view kReasonNames[kRejectionReasonCount] = {"non_finite", "out_of_range", "time_backward",
+                                                                  "time_jump", "duplicate"};
+
+bool within(const Vec3& v, double limit) { return v.cwiseAbs().maxCoeff() <= limit; }
+
+}  // namespace
+
+int rejection_index(SampleVerdict v) {
+  switch (v) {
+    case SampleVerdict::kNonFinite:
+      return 0;
+    case SampleVerdict::kOutOfRange:
+      return 1;
+    case SampleVerdict::kTimeBackward:
+      return 2;
+    case SampleVerdict::kTimeJump:
+      return 3;
+    case SampleVerdict::kDuplicate:
+      return 4;
+    case SampleVerdict::kAccepted:
+    case SampleVerdict::kAcceptedClockReset:
+      break;
+  }
+  return -1;
+}
+
+std::string_view rejection_reason_name(std::size_t index) {
+  return index < kRejectionReasonCount ? kReasonNames[index] : std::string_view("unknown");
+}
+
+SampleGate::SampleGate(const Params& params) : params_(params) {
+  if (!(params.max_forward_jump_s > 0.0) || !(params.max_rebase_step_s > 0.0) || params.rebase_after < 1 ||
+      !(params.max_abs_acc_m_s2 > 0.0) || !(params.max_abs_gyr_rad_s > 0.0) || !(params.max_abs_mag_ut > 0.0)) {
+    throw std::invalid_argument("sample gate: every limit must be > 0 and rebase_after >= 1");
+  }
+  max_jump_ns_ = static_cast<std::uint64_t>(std::llround(params.max_forward_jump_s * 1e9));
+  max_rebase_step_ns_ = static_cast<std::uint64_t>(std::llround(params.max_rebase_step_s * 1e9));
+}
+
+SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
+  ++counters_.received;
+  SampleVerdict verdict = SampleVerdict::kAccepted;
+  if (!s.finite()) {
+    verdict = SampleVerdict::kNonFinite;
+  } else if ((s.has_acc && !within(s.acc, params_.max_abs_acc_m_s2)) ||
+             (s.has_gyr && !within(s.gyr, params_.max_abs_gyr_rad_s)) ||
+             (s.has_mag && !within(s.mag, params_.max_abs_mag_ut))) {
+    verdict = SampleVerdict::kOutOfRange;
+  } else if (!have_last_) {
+    return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
+  } else if (s.timestamp_ns == last_ns_ && seq == last_seq_) {
+    verdict = SampleVerdict::kDuplicate;
+  } else if (s.timestamp_ns <= last_ns_) {
+    return reject_time(SampleVerdict::kTimeBackward, seq, s.timestamp_ns);
+  } else if (s.timestamp_ns - last_ns_ > max_jump_ns_) {
+    return reject_time(SampleVerdict::kTimeJump, seq, s.timestamp_ns);
+  } else {
+    if (seq > last_seq_ + 1) counters_.missing += seq - last_seq_ - 1;
+    return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
+  }
+  ++counters_.rejected[static_cast<std::size_t>(rejection_index(verdict))];
+  return verdict;
+}
+
+SampleVerdict SampleGate::reject_time(SampleVerdict reason, std::uint64_t seq, std::uint64_t t_ns) {
+  // Consecutive samples that agree with each other but not with the old time base are a clock reset.
+  if (candidate_count_ > 0 && t_ns > candidate_ns_ && t_ns - candidate_ns_ <= max_rebase_step_ns_) {
+    ++candidate_count_;
+  } else {
+    candidate_count_ = 1;
+  }
+  candidate_ns_ = t_ns;
+  if (candidate_count_ >= params_.rebase_after) {
+    ++counters_.clock_resets;
+    return accept(SampleVerdict::kAcceptedClockReset, seq, t_ns);
+  }
+  ++counters_.rejected[static_cast<std::size_t>(rejection_index(reason))];
+  return reason;
+}
+
+SampleVerdict SampleGate::accept(SampleVerdict verdict, std::uint64_t seq, std::uint64_t t_ns) {
+  ++counters_.accepted;
+  have_last_ = true;
+  last_seq_ = seq;
+  last_ns_ = t_ns;
+  candidate_count_ = 0;
+  return verdict;
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,188 @@
+#include "demo_command.hpp"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <numbers>
+
+#include "bsn/dds/body_config.hpp"
+#include "bsn/dds/child_process.hpp"
+#include "bsn/dds/log.hpp"
+#include "bsn/dds/participant.hpp"
+#include "bsn/dds/shutdown.hpp"
+#include "format.hpp"
+
+namespace bsn::services {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+constexpr double kDeg = 180.0 / std::numbers::pi;
+
+struct JointView {
+  bsn::JointAngles latest;
+  std::uint64_t count = 0;
+};
+
+struct DemoView {
+  std::mutex mutex;
+  std::map<std::string, JointView> joints;
+  bsn::Status status;
+  bool have_status = false;
+};
+
+std::string render(DemoView& view, const std::vector<std::string>& joint_order, double elapsed_s, bool tty) {
+  std::lock_guard lock(view.mutex);
+  std::string out;
+  char line[256];
+  if (tty) out += "\033[H\033[2J";  // home + clear screen
+  std::snprintf(line, sizeof line, "bsn demo  %.1f s  joint angles in degrees (Ctrl-C stops)\n", elapsed_s);
+  out += line;
+  std::snprintf(line, sizeof line, "%-10s %-18s %4s %9s %9s %9s  %7s  %s\n", "joint", "parent -> child", "axes", "1st",
+                "2nd", "3rd", "samples", "flags");
+  out += line;
+  for (const auto& name : joint_order) {
+    auto it = view.joints.find(name);
+    if (it == view.joints.end()) {
+      std::snprintf(line, sizeof line, "%-10s (waiting for data)\n", name.c_str());
+    } else {
+      const auto& j = it->second.latest;
+      const std::string pc = j.parent() + " -> " + j.child();
+      std::snprintf(line, sizeof line, "%-10s %-18s %4s %9.2f %9.2f %9.2f  %7llu  %s\n", name.c_str(), pc.c_str(),
+                    j.axes().c_str(), j.angles()[0] * kDeg, j.angles()[1] * kDeg, j.angles()[2] * kDeg,
+                    static_cast<unsigned long long>(it->second.count), format_flags(j.flags()).c_str());
+    }
+    out += line;
+  }
+  if (view.have_status) {
+    out += "nodes:";
+    for (const auto& n : view.status.nodes()) {
+      std::snprintf(line, sizeof line, " %s %.0fHz%s", n.node_id().c_str(), n.rate_hz(), n.stale() ? "(STALE)" : "");
+      out += line;
+    }
+    out += "\n";
+  }
+  return out;
+}
+
+}  // namespace
+
+int run_demo(const DemoOptions& opt) {
+  fusion::BodyModel body;
+  try {
+    body = opt.body_path.empty() ? fusion::default_lower_body() : dds::load_body_model(opt.body_path);
+  } catch (const dds::ConfigError& e) {
+    std::fprintf(stderr, "bsn demo: error: %s\n", e.what());
+    return 2;
+  }
+  dds::install_shutdown_handlers();
+
+  // Child logs go to a private folder, removed at the end unless a child failed.
+  char dir_template[] = "/tmp/bsn-demo-XXXXXX";
+  if (mkdtemp(dir_template) == nullptr) {
+    std::perror("bsn demo: mkdtemp");
+    return 1;
+  }
+  const std::filesystem::path dir = dir_template;
+  const std::string body_file = (dir / "body.yaml").string();
+  std::ofstream(body_file) << dds::body_model_to_yaml(body);
+
+  const std::string self = dds::self_executable();
+  const std::string domain = std::to_string(opt.domain);
+  DemoView view;
+  std::vector<std::string> joint_order;
+  for (const auto& s : body.segments)
+    if (!s.parent.empty()) joint_order.push_back(fusion::joint_name(s));
+
+  int exit_code = 0;
+  {
+    dds::Participant participant({opt.domain, "bsn demo"});
+    auto joint_reader = participant.make_reader<bsn::JointAngles>(
+        dds::kJointAnglesTopic, dds::TopicQos::kEstimate,
+        [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo&) {
+          std::lock_guard lock(view.mutex);
+          auto& v = view.joints[j.joint()];
+          v.latest = j;
+          ++v.count;
+        });
+    auto status_reader = participant.make_reader<bsn::Status>(
+        dds::kStatusTopic, dds::TopicQos::kLatched, [&view](const bsn::Status& s, const eprosima::fastdds::dds::SampleInfo&) {
+          std::lock_guard lock(view.mutex);
+          view.status = s;
+          view.have_status = true;
+        });
+
+    std::vector<std::unique_ptr<dds::ChildProcess>> sims;
+    std::unique_ptr<dds::ChildProcess> fusion_process;
+    try {
+      fusion_process = std::make_unique<dds::ChildProcess>(
+          std::vector<std::string>{self, "fusion", "--domain", domain, "--body", body_file},
+          (dir / "fusion.log").string());
+      for (const auto& s : body.segments) {
+        sims.push_back(std::make_unique<dds::ChildProcess>(
+            std::vector<std::string>{self, "sim", "--domain", domain, "--node", s.node, "--segment", s.name, "--rate",
+                                     std::to_string(opt.rate_hz)},
+            (dir / ("sim-" + s.node + ".log")).string()));
+      }
+    } catch (const std::exception& e) {
+      dds::log_error("cannot start the demo processes: ", e.what());
+      exit_code = 1;
+    }
+
+    const bool tty = isatty(STDOUT_FILENO) != 0;
+    const auto start = Clock::now();
+    auto next_draw = start;
+    while (exit_code == 0 && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
+      const auto now = Clock::now();
+      const double elapsed = std::chrono::duration<double>(now - start).count();
+      if (opt.duration_s > 0.0 && elapsed >= opt.duration_s) break;
+      if (!fusion_process->running()) {
+        dds::log_error("bsn fusion ended unexpectedly; see ", (dir / "fusion.log").string());
+        exit_code = 1;
+        break;
+      }
+      if (now >= next_draw) {
+        std::fputs(render(view, joint_order, elapsed, tty).c_str(), stdout);
+        if (!tty) std::fputs("\n", stdout);
+        std::fflush(stdout);
+        next_draw = now + (tty ? std::chrono::milliseconds(200) : std::chrono::milliseconds(1000));
+      }
+    }
+
+    // Sensors first, so the fusion service sees them go before it stops itself.
+    for (auto& s : sims) s->stop();
+    if (fusion_process && fusion_process->stop() != std::optional<int>(0) && exit_code == 0) {
+      dds::log_error("bsn fusion did not stop cleanly; see ", (dir / "fusion.log").string());
+      exit_code = 1;
+    }
+  }
+
+  std::lock_guard lock(view.mutex);
+  std::uint64_t total = 0;
+  std::size_t joints_seen = 0;
+  for (const auto& name : joint_order) {
+    if (auto it = view.joints.find(name); it != view.joints.end() && it->second.count > 0) {
+      ++joints_seen;
+      total += it->second.count;
+    }
+  }
+  std::printf("bsn demo: %llu joint-angle samples from %zu of %zu joints\n", static_cast<unsigned long long>(total),
+              joints_seen, joint_order.size());
+  if (joints_seen < joint_order.size() && exit_code == 0) {
+    dds::log_error("some joints never produced angles; logs kept in ", dir.string());
+    exit_code = 1;
+  }
+  if (exit_code == 0) {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  } else {
+    dds::log_error("logs kept in ", dir.string());
+  }
+  return exit_code;
+}
+
+}  // namespace bsn::services

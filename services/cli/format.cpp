@@ -1,0 +1,109 @@
+#include "format.hpp"
+
+#include <cstdio>
+#include <numbers>
+
+namespace bsn::services {
+namespace {
+
+constexpr double kDeg = 180.0 / std::numbers::pi;
+
+std::string printf_string(const char* fmt, auto... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, fmt, args...);
+  return buf;
+}
+
+std::string vec3(const std::array<double, 3>& v, double scale = 1.0) {
+  return printf_string("[%8.3f %8.3f %8.3f]", v[0] * scale, v[1] * scale, v[2] * scale);
+}
+
+double seconds(std::uint64_t ns) { return static_cast<double>(ns) * 1e-9; }
+
+const char* kind_name(bsn::CalibrationKind k) {
+  switch (k) {
+    case bsn::CALIBRATION_MAGNETOMETER:
+      return "magnetometer";
+    case bsn::CALIBRATION_GYRO_BIAS:
+      return "gyro_bias";
+    case bsn::CALIBRATION_ACCELEROMETER:
+      return "accelerometer";
+  }
+  return "unknown";
+}
+
+}  // namespace
+
+std::string format_flags(std::uint32_t f) {
+  std::string out;
+  auto add = [&](std::uint32_t bit, const char* name) {
+    if (f & bit) out += (out.empty() ? "" : ",") + std::string(name);
+  };
+  add(bsn::FLAG_RESTING, "resting");
+  add(bsn::FLAG_MAG_REJECTED, "mag_rejected");
+  add(bsn::FLAG_STALE, "stale");
+  add(bsn::FLAG_INITIALISING, "initialising");
+  add(bsn::FLAG_REINITIALISED, "reinitialised");
+  return out.empty() ? "-" : out;
+}
+
+std::string format_sample(const bsn::RawSample& s) {
+  std::string missing;
+  if (!(s.channels() & bsn::CHANNEL_ACC)) missing += " no-acc";
+  if (!(s.channels() & bsn::CHANNEL_GYR)) missing += " no-gyr";
+  if (!(s.channels() & bsn::CHANNEL_MAG)) missing += " no-mag";
+  return "raw " + s.node_id() + printf_string(" seq=%llu t=%.6fs", static_cast<unsigned long long>(s.seq()),
+                                              seconds(s.timestamp_ns())) +
+         " acc=" + vec3(s.acc()) + " m/s2 gyr=" + vec3(s.gyr(), kDeg) + " deg/s mag=" + vec3(s.mag()) + " uT" + missing;
+}
+
+std::string format_sample(const bsn::Orientation& s, const char* prefix) {
+  const auto& q = s.quat();
+  return std::string(prefix) + " " + s.segment() +
+         printf_string(" t=%.6fs yaw=%8.2f pitch=%7.2f roll=%8.2f deg q=[%.4f %.4f %.4f %.4f]",
+                       seconds(s.timestamp_ns()), s.yaw() * kDeg, s.pitch() * kDeg, s.roll() * kDeg, q[0], q[1], q[2],
+                       q[3]) +
+         " bias=" + vec3(s.gyro_bias(), kDeg) + " deg/s flags=" + format_flags(s.flags());
+}
+
+std::string format_sample(const bsn::JointAngles& s) {
+  const auto& a = s.angles();
+  return "joint " + s.joint() + " (" + s.parent() + " -> " + s.child() + ")" +
+         printf_string(" t=%.6fs %s=[%8.2f %8.2f %8.2f] deg", seconds(s.timestamp_ns()), s.axes().c_str(), a[0] * kDeg,
+                       a[1] * kDeg, a[2] * kDeg) +
+         " flags=" + format_flags(s.flags());
+}
+
+std::string format_sample(const bsn::Status& s) {
+  std::string out = "status " + s.process_id() +
+                    printf_string(" period=%.2fs unknown_node_samples=%llu qos_mismatches=%llu write_failures=%llu",
+                                  s.period_s(), static_cast<unsigned long long>(s.unknown_node_samples()),
+                                  static_cast<unsigned long long>(s.qos_mismatches()),
+                                  static_cast<unsigned long long>(s.write_failures()));
+  for (const auto& n : s.nodes()) {
+    out += "\n  " + n.node_id() + " (" + n.segment() + ")" +
+           printf_string(" %6.1f Hz received=%llu accepted=%llu missing=%llu clock_resets=%llu%s rejected:", n.rate_hz(),
+                         static_cast<unsigned long long>(n.received()), static_cast<unsigned long long>(n.accepted()),
+                         static_cast<unsigned long long>(n.missing()), static_cast<unsigned long long>(n.clock_resets()),
+                         n.stale() ? " STALE" : "");
+    for (const auto& r : n.rejected()) out += " " + r.reason() + "=" + std::to_string(r.count());
+  }
+  return out;
+}
+
+std::string format_sample(const bsn::CalibrationRequest& s) {
+  return "calibration_request " + s.request_id() + " node=" + s.node_id() + " kind=" + kind_name(s.kind()) +
+         printf_string(" duration=%.1fs samples=%u", s.duration_s(), s.sample_count());
+}
+
+std::string format_sample(const bsn::CalibrationResult& s) {
+  const auto& h = s.transform();
+  return "calibration_result " + s.node_id() + " request=" + s.request_id() + " kind=" + kind_name(s.kind()) +
+         (s.success() ? " ok" : " FAILED") + " bias=" + vec3(s.bias()) +
+         printf_string(" H=[%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f] M=%.3f residual=%.4f cond=%.1f poses=%u",
+                       h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8], s.field_magnitude(), s.residual_rms(),
+                       s.condition_number(), s.pose_count()) +
+         (s.message().empty() ? "" : " message=\"" + s.message() + "\"");
+}
+
+}  // namespace bsn::services

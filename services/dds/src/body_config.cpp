@@ -1,0 +1,179 @@
+#include "bsn/dds/body_config.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <fstream>
+#include <initializer_list>
+#include <map>
+#include <sstream>
+#include <string_view>
+#include <vector>
+
+namespace bsn::dds {
+namespace {
+
+using fusion::BodyModel;
+using fusion::FilterSpec;
+using fusion::SegmentSpec;
+
+class Parser {
+ public:
+  explicit Parser(std::string source) : source_(std::move(source)) {}
+
+  [[noreturn]] void fail(const YAML::Node& at, const std::string& what) const {
+    fail_at(at.Mark().line + 1, what);
+  }
+  [[noreturn]] void fail_at(int line, const std::string& what) const {
+    throw ConfigError(source_ + ":" + std::to_string(line) + ": " + what);
+  }
+
+  void require_map(const YAML::Node& n, const std::string& what) const {
+    if (!n.IsMap()) fail(n, what + " must be a mapping (key: value)");
+  }
+
+  void check_keys(const YAML::Node& n, std::initializer_list<std::string_view> known, const std::string& where) const {
+    for (const auto& kv : n) {
+      const std::string key = kv.first.as<std::string>();
+      bool ok = false;
+      for (auto k : known) ok = ok || key == k;
+      if (!ok) {
+        std::string list;
+        for (auto k : known) list += std::string(list.empty() ? "" : ", ") + std::string(k);
+        fail(kv.first, "unknown key '" + key + "' in " + where + " (known keys: " + list + ")");
+      }
+    }
+  }
+
+  std::string scalar(const YAML::Node& n, const std::string& what) const {
+    if (!n.IsScalar()) fail(n, what + " must be a single value");
+    return n.as<std::string>();
+  }
+
+  fusion::AxisSequence axes(const YAML::Node& n) const {
+    const std::string text = scalar(n, "joint_axes");
+    auto seq = fusion::parse_axis_sequence(text);
+    if (!seq) fail(n, "joint_axes '" + text + "' is not a sequence of three distinct axes such as zyx or zxy");
+    return *seq;
+  }
+
+  FilterSpec filter(const YAML::Node& n, const FilterSpec& base) const {
+    require_map(n, "filter");
+    FilterSpec spec = base;
+    if (n["name"]) {
+      const std::string name = scalar(n["name"], "filter name");
+      if (name != base.name) spec.parameters.clear();  // another filter: the defaults' parameters do not apply
+      spec.name = name;
+    }
+    for (const auto& kv : n) {
+      const std::string key = kv.first.as<std::string>();
+      if (key == "name") continue;
+      double value = 0.0;
+      try {
+        value = kv.second.as<double>();
+      } catch (const YAML::Exception&) {
+        fail(kv.second, "filter parameter '" + key + "' must be a number");
+      }
+      std::erase_if(spec.parameters, [&](const auto& p) { return p.first == key; });
+      spec.parameters.emplace_back(key, value);
+    }
+    // Let the filter factory judge names and values now, so a bad parameter is reported at its line.
+    try {
+      (void)fusion::make_filter(spec);
+    } catch (const std::invalid_argument& e) {
+      fail(n, e.what());
+    }
+    return spec;
+  }
+
+  BodyModel body(const YAML::Node& root) {
+    if (!root || root.IsNull()) fail_at(1, "the body model file is empty");
+    require_map(root, "the body model");
+    check_keys(root, {"name", "defaults", "segments"}, "the body model");
+    BodyModel model;
+    if (root["name"]) model.name = scalar(root["name"], "name");
+
+    FilterSpec default_filter;
+    fusion::AxisSequence default_axes;
+    if (const YAML::Node d = root["defaults"]) {
+      require_map(d, "defaults");
+      check_keys(d, {"filter", "joint_axes"}, "defaults");
+      if (d["filter"]) default_filter = filter(d["filter"], default_filter);
+      if (d["joint_axes"]) default_axes = axes(d["joint_axes"]);
+    }
+
+    const YAML::Node segs = root["segments"];
+    if (!segs) fail(root, "the body model has no 'segments' list");
+    if (!segs.IsSequence()) fail(segs, "'segments' must be a list of segments");
+    std::vector<int> lines;
+    for (const YAML::Node& s : segs) {
+      require_map(s, "a segment");
+      check_keys(s, {"name", "node", "parent", "joint", "joint_axes", "filter"}, "segment");
+      SegmentSpec spec;
+      if (!s["name"]) fail(s, "segment without 'name'");
+      spec.name = scalar(s["name"], "name");
+      spec.node = s["node"] ? scalar(s["node"], "node") : spec.name;
+      if (s["parent"] && !s["parent"].IsNull()) spec.parent = scalar(s["parent"], "parent");
+      if (s["joint"]) spec.joint = scalar(s["joint"], "joint");
+      spec.joint_axes = s["joint_axes"] ? axes(s["joint_axes"]) : default_axes;
+      spec.filter = s["filter"] ? filter(s["filter"], default_filter) : default_filter;
+      model.segments.push_back(std::move(spec));
+      lines.push_back(s.Mark().line + 1);
+    }
+    if (auto problem = fusion::check_body_model(model)) {
+      fail_at(lines.empty() ? segs.Mark().line + 1 : lines[problem->segment_index], problem->message);
+    }
+    return model;
+  }
+
+ private:
+  std::string source_;
+};
+
+}  // namespace
+
+BodyModel parse_body_model(const std::string& yaml_text, const std::string& source) {
+  Parser parser(source);
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    parser.fail_at(e.mark.line + 1, "YAML syntax error: " + e.msg);
+  }
+  try {
+    return parser.body(root);
+  } catch (const YAML::Exception& e) {
+    parser.fail_at(e.mark.line + 1, e.msg);
+  }
+}
+
+BodyModel load_body_model(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot open the body model file");
+  std::stringstream text;
+  text << in.rdbuf();
+  return parse_body_model(text.str(), path);
+}
+
+std::string body_model_to_yaml(const BodyModel& body) {
+  YAML::Emitter out;
+  out << YAML::BeginMap;
+  if (!body.name.empty()) out << YAML::Key << "name" << YAML::Value << body.name;
+  out << YAML::Key << "segments" << YAML::Value << YAML::BeginSeq;
+  for (const auto& s : body.segments) {
+    out << YAML::BeginMap << YAML::Key << "name" << YAML::Value << s.name;
+    out << YAML::Key << "node" << YAML::Value << s.node;
+    if (!s.parent.empty()) {
+      out << YAML::Key << "parent" << YAML::Value << s.parent;
+      out << YAML::Key << "joint" << YAML::Value << fusion::joint_name(s);
+      out << YAML::Key << "joint_axes" << YAML::Value << s.joint_axes.name();
+    }
+    out << YAML::Key << "filter" << YAML::Value << YAML::Flow << YAML::BeginMap;
+    out << YAML::Key << "name" << YAML::Value << s.filter.name;
+    for (const auto& [k, v] : s.filter.parameters) out << YAML::Key << k << YAML::Value << v;
+    out << YAML::EndMap << YAML::EndMap;
+  }
+  out << YAML::EndSeq << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
+}  // namespace bsn::dds

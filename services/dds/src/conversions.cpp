@@ -1,0 +1,51 @@
+#include "bsn/dds/conversions.hpp"
+
+#include <time.h>
+
+namespace bsn::dds {
+namespace {
+fusion::Vec3 vec(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
+std::array<double, 3> arr(const fusion::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+}  // namespace
+
+fusion::ImuSample to_imu_sample(const bsn::RawSample& raw) {
+  fusion::ImuSample s;
+  s.timestamp_ns = raw.timestamp_ns();
+  s.acc = vec(raw.acc());
+  s.gyr = vec(raw.gyr());
+  s.mag = vec(raw.mag());
+  s.has_acc = (raw.channels() & bsn::CHANNEL_ACC) != 0;
+  s.has_gyr = (raw.channels() & bsn::CHANNEL_GYR) != 0;
+  s.has_mag = (raw.channels() & bsn::CHANNEL_MAG) != 0;
+  return s;
+}
+
+void fill_raw_sample(const fusion::ImuSample& s, bsn::RawSample& raw) {
+  raw.timestamp_ns(s.timestamp_ns);
+  raw.acc(arr(s.acc));
+  raw.gyr(arr(s.gyr));
+  raw.mag(arr(s.mag));
+  raw.channels((s.has_acc ? bsn::CHANNEL_ACC : 0u) | (s.has_gyr ? bsn::CHANNEL_GYR : 0u) |
+               (s.has_mag ? bsn::CHANNEL_MAG : 0u));
+}
+
+fusion::Quat to_quat(const std::array<double, 4>& q) { return fusion::Quat(q[0], q[1], q[2], q[3]); }
+
+std::array<double, 4> to_wxyz(const fusion::Quat& q) { return {q.w(), q.x(), q.y(), q.z()}; }
+
+void fill_orientation(const fusion::Quat& q, bsn::Orientation& out) {
+  const fusion::Quat c = fusion::canonical(q);
+  out.quat(to_wxyz(c));
+  const fusion::YawPitchRoll ypr = fusion::to_yaw_pitch_roll(c);
+  out.yaw(ypr.yaw);
+  out.pitch(ypr.pitch);
+  out.roll(ypr.roll);
+}
+
+std::uint64_t monotonic_ns() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
+}
+
+}  // namespace bsn::dds

@@ -1,0 +1,59 @@
+#include "bsn/dds/log.hpp"
+
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <mutex>
+
+namespace bsn::dds {
+namespace {
+
+struct LogConfig {
+  std::mutex mutex;
+  std::string role = "bsn";
+  LogLevel min_level = LogLevel::kInfo;
+};
+
+LogConfig& config() {
+  static LogConfig c;
+  return c;
+}
+
+const char* level_name(LogLevel l) {
+  switch (l) {
+    case LogLevel::kDebug:
+      return "debug";
+    case LogLevel::kInfo:
+      return "info";
+    case LogLevel::kWarn:
+      return "warning";
+    case LogLevel::kError:
+      return "error";
+  }
+  return "";
+}
+
+}  // namespace
+
+void set_log_identity(std::string role, LogLevel min_level) {
+  std::lock_guard lock(config().mutex);
+  config().role = std::move(role);
+  config().min_level = min_level;
+}
+
+void log_line(LogLevel level, std::string_view message) {
+  LogConfig& c = config();
+  std::lock_guard lock(c.mutex);
+  if (level < c.min_level) return;
+  const auto now = std::chrono::system_clock::now();
+  const std::time_t secs = std::chrono::system_clock::to_time_t(now);
+  const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(now.time_since_epoch()).count() % 1000;
+  std::tm tm{};
+  gmtime_r(&secs, &tm);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%H:%M:%S", &tm);
+  std::fprintf(stderr, "%s.%03lld [%s] %s: %.*s\n", stamp, static_cast<long long>(ms), c.role.c_str(),
+               level_name(level), static_cast<int>(message.size()), message.data());
+}
+
+}  // namespace bsn::dds

@@ -1,0 +1,133 @@
+#include "bsn/dds/participant.hpp"
+
+#include <cstdlib>
+#include <stdexcept>
+
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+
+#include "bsn/dds/log.hpp"
+
+namespace bsn::dds {
+
+using namespace eprosima::fastdds::dds;
+
+namespace {
+
+class WriterEvents final : public DataWriterListener {
+ public:
+  explicit WriterEvents(std::shared_ptr<EndpointEvents> ev) : events_(std::move(ev)) {}
+  void on_publication_matched(DataWriter*, const PublicationMatchedStatus& s) override {
+    events_->matched.store(s.current_count);
+  }
+  void on_offered_incompatible_qos(DataWriter*, const OfferedIncompatibleQosStatus& s) override {
+    if (events_->mismatch_counter) ++*events_->mismatch_counter;
+    log_warn("topic ", events_->topic, ": a reader requests QoS this writer does not offer (",
+             qos_policy_name(s.last_policy_id), "); that reader receives nothing from us. bsn readers use ",
+             "BEST_EFFORT for streaming topics and match any writer.");
+  }
+
+ private:
+  std::shared_ptr<EndpointEvents> events_;
+};
+
+class ReaderEvents final : public DataReaderListener {
+ public:
+  explicit ReaderEvents(std::shared_ptr<EndpointEvents> ev) : events_(std::move(ev)) {}
+  void on_data_available(DataReader* reader) override {
+    std::lock_guard lock(events_->callback_mutex);
+    if (events_->on_data) events_->on_data(reader);
+  }
+  void on_subscription_matched(DataReader*, const SubscriptionMatchedStatus& s) override {
+    events_->matched.store(s.current_count);
+  }
+  void on_requested_incompatible_qos(DataReader*, const RequestedIncompatibleQosStatus& s) override {
+    if (events_->mismatch_counter) ++*events_->mismatch_counter;
+    log_warn("topic ", events_->topic, ": a writer offers QoS incompatible with this reader (",
+             qos_policy_name(s.last_policy_id), "); nothing from it will arrive. A BEST_EFFORT writer never ",
+             "matches a RELIABLE reader.");
+  }
+
+ private:
+  std::shared_ptr<EndpointEvents> events_;
+};
+
+DomainParticipantQos participant_qos(const std::string& name) {
+  // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies.
+  DomainParticipantQos qos = DomainParticipantFactory::get_instance()->get_default_participant_qos();
+  qos.name(name);
+  if (std::getenv("FASTRTPS_DEFAULT_PROFILES_FILE") == nullptr) {
+    // UDPv4 only, unless a profile says otherwise. Fast DDS 2.9.1 sends every BEST_EFFORT sample over both
+    // shared memory and UDP (fixed in 2.9.2), and shared memory leaves files in /dev/shm when a process is
+    // killed. On loopback UDP costs a few microseconds, far below a 10 ms sample period.
+    qos.transport().use_builtin_transports = false;
+    qos.transport().user_transports.push_back(std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>());
+  }
+  return qos;
+}
+
+}  // namespace
+
+int default_domain() {
+  if (const char* env = std::getenv("BSN_DOMAIN")) {
+    char* end = nullptr;
+    const long v = std::strtol(env, &end, 10);
+    if (end != env && *end == '\0' && v >= 0 && v <= 232) return static_cast<int>(v);
+    log_warn("BSN_DOMAIN='", env, "' is not a domain id in 0..232; using 0");
+  }
+  return 0;
+}
+
+Participant::Participant(const Options& options) {
+  if (options.domain < 0 || options.domain > 232) {
+    throw std::runtime_error("DDS domain id " + std::to_string(options.domain) + " is outside 0..232");
+  }
+  participant_ = DomainParticipantFactory::get_instance()->create_participant(
+      static_cast<DomainId_t>(options.domain), participant_qos(options.name));
+  if (!participant_) throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options.domain));
+  publisher_ = participant_->create_publisher(PUBLISHER_QOS_DEFAULT);
+  subscriber_ = participant_->create_subscriber(SUBSCRIBER_QOS_DEFAULT);
+  if (!publisher_ || !subscriber_) throw std::runtime_error("cannot create a DDS publisher or subscriber");
+}
+
+Participant::~Participant() {
+  if (!participant_) return;
+  // Stop callbacks before the listeners they call are destroyed.
+  for (DataReader* r : readers_) r->set_listener(nullptr);
+  participant_->delete_contained_entities();
+  DomainParticipantFactory::get_instance()->delete_participant(participant_);
+}
+
+Topic* Participant::find_or_create_topic(const std::string& name, TypeSupport type) {
+  std::lock_guard lock(mutex_);
+  if (auto it = topics_.find(name); it != topics_.end()) return it->second;
+  if (participant_->find_type(type.get_type_name()) == nullptr) type.register_type(participant_);
+  Topic* t = participant_->create_topic(name, type.get_type_name(), TOPIC_QOS_DEFAULT);
+  if (!t) throw std::runtime_error("cannot create DDS topic " + name);
+  topics_[name] = t;
+  return t;
+}
+
+DataWriter* Participant::create_writer(Topic* topic, const DataWriterQos& qos, std::shared_ptr<EndpointEvents> events) {
+  events->topic = topic->get_name();
+  events->mismatch_counter = &qos_mismatches_;
+  auto listener = std::make_unique<WriterEvents>(events);
+  DataWriter* w = publisher_->create_datawriter(topic, qos, listener.get(), StatusMask::all());
+  if (!w) throw std::runtime_error("cannot create a DDS writer on " + topic->get_name());
+  std::lock_guard lock(mutex_);
+  writer_listeners_.push_back(std::move(listener));
+  return w;
+}
+
+void Participant::create_reader(Topic* topic, const DataReaderQos& qos, std::shared_ptr<EndpointEvents> events) {
+  events->topic = topic->get_name();
+  events->mismatch_counter = &qos_mismatches_;
+  auto listener = std::make_unique<ReaderEvents>(events);
+  DataReader* r = subscriber_->create_datareader(topic, qos, listener.get(), StatusMask::all());
+  if (!r) throw std::runtime_error("cannot create a DDS reader on " + topic->get_name());
+  std::lock_guard lock(mutex_);
+  reader_listeners_.push_back(std::move(listener));
+  readers_.push_back(r);
+}
+
+}  // namespace bsn::dds

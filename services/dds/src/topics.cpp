@@ -1,0 +1,85 @@
+#include "bsn/dds/topics.hpp"
+
+#include <fastdds/dds/core/policy/QosPolicies.hpp>
+
+namespace bsn::dds {
+
+using namespace eprosima::fastdds::dds;
+
+namespace {
+
+struct Delivery {
+  ReliabilityQosPolicyKind reliability;
+  DurabilityQosPolicyKind durability;
+  int writer_depth;
+  int reader_depth;
+};
+
+Delivery delivery(TopicQos kind) {
+  switch (kind) {
+    case TopicQos::kSensorData:
+      return {BEST_EFFORT_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 8, 64};
+    case TopicQos::kEstimate:
+      return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 1, 64};
+    case TopicQos::kEstimateBestEffort:
+      return {BEST_EFFORT_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 1, 64};
+    case TopicQos::kLatched:
+      return {RELIABLE_RELIABILITY_QOS, TRANSIENT_LOCAL_DURABILITY_QOS, 1, 8};
+    case TopicQos::kCommand:
+      return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 16, 16};
+  }
+  return {BEST_EFFORT_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 1, 1};
+}
+
+}  // namespace
+
+DataWriterQos writer_qos(TopicQos kind) {
+  const Delivery d = delivery(kind);
+  DataWriterQos q = DATAWRITER_QOS_DEFAULT;
+  q.reliability().kind = d.reliability;
+  q.durability().kind = d.durability;
+  q.history().kind = KEEP_LAST_HISTORY_QOS;
+  q.history().depth = d.writer_depth;
+  // Data is written from the caller's thread: lowest latency, and no extra thread per writer.
+  q.publish_mode().kind = SYNCHRONOUS_PUBLISH_MODE;
+  return q;
+}
+
+DataReaderQos reader_qos(TopicQos kind) {
+  const Delivery d = delivery(kind);
+  DataReaderQos q = DATAREADER_QOS_DEFAULT;
+  // A best-effort reader matches writers of either kind; only latched and command topics need reliability.
+  q.reliability().kind = (kind == TopicQos::kLatched || kind == TopicQos::kCommand) ? RELIABLE_RELIABILITY_QOS
+                                                                                     : BEST_EFFORT_RELIABILITY_QOS;
+  q.durability().kind = d.durability;
+  q.history().kind = KEEP_LAST_HISTORY_QOS;
+  q.history().depth = d.reader_depth;
+  return q;
+}
+
+const char* qos_policy_name(unsigned id) {
+  switch (id) {
+    case DURABILITY_QOS_POLICY_ID:
+      return "DURABILITY";
+    case DEADLINE_QOS_POLICY_ID:
+      return "DEADLINE";
+    case LATENCYBUDGET_QOS_POLICY_ID:
+      return "LATENCY_BUDGET";
+    case OWNERSHIP_QOS_POLICY_ID:
+      return "OWNERSHIP";
+    case LIVELINESS_QOS_POLICY_ID:
+      return "LIVELINESS";
+    case RELIABILITY_QOS_POLICY_ID:
+      return "RELIABILITY";
+    case DESTINATIONORDER_QOS_POLICY_ID:
+      return "DESTINATION_ORDER";
+    case PRESENTATION_QOS_POLICY_ID:
+      return "PRESENTATION";
+    case DATAREPRESENTATION_QOS_POLICY_ID:
+      return "DATA_REPRESENTATION";
+    default:
+      return "policy";
+  }
+}
+
+}  // namespace bsn::dds
