@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <fstream>
 #include <initializer_list>
 #include <map>
@@ -129,6 +130,44 @@ class Parser {
   std::string source_;
 };
 
+// yaml-cpp reports an unclosed '[' or '{' where it gave up looking for the closing bracket: the next line or the
+// end of the file, not where the mistake is. Returns the 1-based line of the innermost flow collection still open
+// at offset `end` of `text`, or 0 if none is found. A heuristic (quotes and comments skipped; in block context a
+// bracket counts only where a flow collection can start), used for that one message.
+int unclosed_flow_line(const std::string& text, std::size_t end) {
+  std::vector<int> open;
+  int line = 1;
+  char prev = '\0';  // last non-blank character on the current line
+  end = std::min(end, text.size());
+  for (std::size_t i = 0; i < end; ++i) {
+    const char c = text[i];
+    if (c == '\n') {
+      ++line;
+      prev = '\0';
+      continue;
+    }
+    if (c == ' ' || c == '\t' || c == '\r') continue;
+    const bool value_start = !open.empty() || prev == '\0' || prev == ':' || prev == '-' || prev == ',' ||
+                             prev == '[' || prev == '{' || prev == '?';
+    if (c == '#' && (i == 0 || text[i - 1] == ' ' || text[i - 1] == '\t' || text[i - 1] == '\n')) {
+      while (i + 1 < end && text[i + 1] != '\n') ++i;
+      continue;
+    }
+    if ((c == '\'' || c == '"') && value_start) {
+      for (++i; i < end && text[i] != c; ++i) {
+        if (text[i] == '\n') ++line;
+        if (c == '"' && text[i] == '\\') ++i;
+      }
+    } else if ((c == '[' || c == '{') && value_start) {
+      open.push_back(line);
+    } else if ((c == ']' || c == '}') && !open.empty()) {
+      open.pop_back();
+    }
+    prev = c;
+  }
+  return open.empty() ? 0 : open.back();
+}
+
 }  // namespace
 
 BodyModel parse_body_model(const std::string& yaml_text, const std::string& source) {
@@ -137,6 +176,15 @@ BodyModel parse_body_model(const std::string& yaml_text, const std::string& sour
   try {
     root = YAML::Load(yaml_text);
   } catch (const YAML::ParserException& e) {
+    const bool seq = e.msg == YAML::ErrorMsg::END_OF_SEQ_FLOW;
+    if (seq || e.msg == YAML::ErrorMsg::END_OF_MAP_FLOW) {
+      const int opened = unclosed_flow_line(yaml_text, e.mark.pos < 0 ? 0 : static_cast<std::size_t>(e.mark.pos));
+      if (opened > 0) {
+        parser.fail_at(opened, std::string("YAML syntax error: the '") + (seq ? '[' : '{') +
+                                   "' opened on this line is never closed (" + e.msg + ", line " +
+                                   std::to_string(e.mark.line + 1) + ")");
+      }
+    }
     parser.fail_at(e.mark.line + 1, "YAML syntax error: " + e.msg);
   }
   try {

@@ -1,0 +1,149 @@
+// Body model rules and the YAML loader's messages: file, line and problem.
+#include <gtest/gtest.h>
+
+#include "bsn/dds/body_config.hpp"
+#include "bsn/fusion/body_model.hpp"
+
+namespace bsn {
+namespace {
+
+using dds::ConfigError;
+using dds::parse_body_model;
+
+// Parses and returns the error message, or "" if it parsed.
+std::string error_of(const std::string& yaml) {
+  try {
+    parse_body_model(yaml, "body.yaml");
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(BodyModel, DefaultLowerBodyIsValid) {
+  const fusion::BodyModel body = fusion::default_lower_body();
+  EXPECT_EQ(body.segments.size(), 7u);
+  EXPECT_FALSE(fusion::check_body_model(body).has_value());
+  EXPECT_EQ(fusion::joint_name(body.segments[*body.find_segment("shank_l")]), "knee_l");
+}
+
+TEST(BodyModel, ParsesAFullFile) {
+  const auto body = parse_body_model(R"(name: leg
+defaults:
+  filter: {name: complementary, tau_acc_s: 3}
+  joint_axes: zxy
+segments:
+  - name: thigh
+    node: n1
+  - name: shank
+    node: n2
+    parent: thigh
+    joint: knee
+    filter: {tau_mag_s: 8}
+  - name: foot
+    node: n3
+    parent: shank
+    joint_axes: xyz
+)",
+                                     "body.yaml");
+  ASSERT_EQ(body.segments.size(), 3u);
+  EXPECT_EQ(body.name, "leg");
+  EXPECT_EQ(body.segments[1].joint, "knee");
+  EXPECT_EQ(body.segments[1].joint_axes.name(), "zxy");
+  EXPECT_EQ(body.segments[2].joint_axes.name(), "xyz");
+  EXPECT_EQ(fusion::joint_name(body.segments[2]), "shank-foot");
+  // Segment filter blocks override the defaults key by key.
+  const auto& params = body.segments[1].filter.parameters;
+  ASSERT_EQ(params.size(), 2u);
+  EXPECT_EQ(params[0], (std::pair<std::string, double>{"tau_acc_s", 3.0}));
+  EXPECT_EQ(params[1], (std::pair<std::string, double>{"tau_mag_s", 8.0}));
+}
+
+TEST(BodyModel, RoundTripsThroughYaml) {
+  const auto body = fusion::default_lower_body();
+  const auto again = parse_body_model(dds::body_model_to_yaml(body), "generated");
+  ASSERT_EQ(again.segments.size(), body.segments.size());
+  for (std::size_t i = 0; i < body.segments.size(); ++i) {
+    EXPECT_EQ(again.segments[i].name, body.segments[i].name);
+    EXPECT_EQ(again.segments[i].parent, body.segments[i].parent);
+    EXPECT_EQ(fusion::joint_name(again.segments[i]), fusion::joint_name(body.segments[i]));
+  }
+}
+
+TEST(BodyModel, UnknownKeyNamesFileLineAndKey) {
+  const std::string e = error_of("segments:\n  - name: a\n    colour: red\n");
+  EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown key 'colour'"), std::string::npos) << e;
+}
+
+TEST(BodyModel, DuplicateSegmentNamesTheSecondEntry) {
+  const std::string e = error_of("segments:\n  - name: a\n    node: n1\n  - name: a\n    node: n2\n");
+  EXPECT_NE(e.find("body.yaml:4:"), std::string::npos) << e;
+  EXPECT_NE(e.find("duplicate segment 'a'"), std::string::npos) << e;
+}
+
+TEST(BodyModel, DuplicateNode) {
+  const std::string e = error_of("segments:\n  - name: a\n    node: n1\n  - name: b\n    node: n1\n");
+  EXPECT_NE(e.find("body.yaml:4:"), std::string::npos) << e;
+  EXPECT_NE(e.find("node 'n1'"), std::string::npos) << e;
+}
+
+TEST(BodyModel, ParentCycle) {
+  const std::string e = error_of("segments:\n  - name: a\n    parent: b\n  - name: b\n    parent: a\n");
+  EXPECT_NE(e.find("body.yaml:2:"), std::string::npos) << e;
+  EXPECT_NE(e.find("parent cycle: a -> b -> a"), std::string::npos) << e;
+}
+
+TEST(BodyModel, SelfParentIsACycle) {
+  const std::string e = error_of("segments:\n  - name: a\n    parent: a\n");
+  EXPECT_NE(e.find("parent cycle"), std::string::npos) << e;
+}
+
+TEST(BodyModel, UnknownParent) {
+  const std::string e = error_of("segments:\n  - name: a\n  - name: b\n    parent: torso\n");
+  EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;
+  EXPECT_NE(e.find("unknown parent 'torso'"), std::string::npos) << e;
+}
+
+TEST(BodyModel, YamlSyntaxError) {
+  const std::string e = error_of("segments:\n  - name: a\n  - name: [b\n");
+  EXPECT_NE(e.find("body.yaml:"), std::string::npos) << e;
+  EXPECT_NE(e.find("YAML syntax error"), std::string::npos) << e;
+}
+
+TEST(BodyModel, BadFilterParameterNamesItsLine) {
+  const std::string e = error_of("segments:\n  - name: a\n    filter: {name: complementary, tau_acc_s: -1}\n");
+  EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;
+  EXPECT_NE(e.find("tau_acc_s"), std::string::npos) << e;
+  const std::string e2 = error_of("segments:\n  - name: a\n    filter: {name: complementary, tau: x}\n");
+  EXPECT_NE(e2.find("must be a number"), std::string::npos) << e2;
+  const std::string e3 = error_of("segments:\n  - name: a\n    filter: {name: magic}\n");
+  EXPECT_NE(e3.find("unknown filter 'magic'"), std::string::npos) << e3;
+}
+
+TEST(BodyModel, BadJointAxes) {
+  const std::string e = error_of("segments:\n  - name: a\n  - name: b\n    parent: a\n    joint_axes: zzx\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("zzx"), std::string::npos) << e;
+}
+
+TEST(BodyModel, StructuralProblems) {
+  EXPECT_NE(error_of("").find("empty"), std::string::npos);
+  EXPECT_NE(error_of("name: x\n").find("no 'segments'"), std::string::npos);
+  EXPECT_NE(error_of("segments: []\n").find("no segments"), std::string::npos);
+  EXPECT_NE(error_of("segments: 3\n").find("list"), std::string::npos);
+  EXPECT_NE(error_of("segments:\n  - node: n\n").find("without 'name'"), std::string::npos);
+  EXPECT_NE(error_of("segments:\n  - name: " + std::string(64, 'a') + "\n").find("63 characters"), std::string::npos);
+}
+
+TEST(BodyModel, MissingFileIsAConfigError) {
+  try {
+    dds::load_body_model("/nonexistent/body.yaml");
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/body.yaml"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace bsn

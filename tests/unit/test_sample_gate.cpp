@@ -1,0 +1,131 @@
+// SampleGate: every sample either reaches the filter or is counted under one reason.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "bsn/fusion/sample_gate.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+constexpr std::uint64_t kMs = 1'000'000;
+
+ImuSample at(std::uint64_t t_ns) {
+  ImuSample s;
+  s.timestamp_ns = t_ns;
+  s.acc = Vec3(0, 0, kGravity);
+  s.mag = Vec3(0, 20, -40);
+  return s;
+}
+
+std::uint64_t rejected(const SampleGate& g, SampleVerdict v) {
+  return g.counters().rejected[static_cast<std::size_t>(rejection_index(v))];
+}
+
+TEST(SampleGate, AcceptsAStream) {
+  SampleGate g;
+  for (std::uint64_t k = 0; k < 100; ++k) EXPECT_EQ(g.check(k, at(k * 10 * kMs)), SampleVerdict::kAccepted);
+  EXPECT_EQ(g.counters().accepted, 100u);
+  EXPECT_EQ(g.counters().received, 100u);
+  EXPECT_EQ(g.counters().missing, 0u);
+}
+
+TEST(SampleGate, CountsEachRejectionByReasonAndRecovers) {
+  SampleGate g;
+  std::uint64_t seq = 0, t = 1000 * kMs;
+  auto next = [&] {
+    ++seq;
+    t += 10 * kMs;
+    return at(t);
+  };
+  EXPECT_EQ(g.check(seq, at(t)), SampleVerdict::kAccepted);
+  ImuSample nan = next();
+  nan.gyr.x() = std::nan("");
+  EXPECT_EQ(g.check(seq, nan), SampleVerdict::kNonFinite);
+  ImuSample inf = next();
+  inf.mag.z() = INFINITY;
+  EXPECT_EQ(g.check(seq, inf), SampleVerdict::kNonFinite);
+  ImuSample huge = next();
+  huge.acc.x() = 1e6;
+  EXPECT_EQ(g.check(seq, huge), SampleVerdict::kOutOfRange);
+  EXPECT_EQ(g.check(seq, next()), SampleVerdict::kAccepted);  // good sample right after: recovered
+  const std::uint64_t last_good = t;
+  EXPECT_EQ(g.check(seq, at(last_good)), SampleVerdict::kDuplicate);
+  EXPECT_EQ(g.check(seq + 1, at(last_good - 500 * kMs)), SampleVerdict::kTimeBackward);
+  EXPECT_EQ(g.check(seq + 2, at(last_good + 100'000 * kMs)), SampleVerdict::kTimeJump);
+  seq += 3;
+  t = last_good + 10 * kMs;
+  EXPECT_EQ(g.check(seq, at(t)), SampleVerdict::kAccepted);
+
+  EXPECT_EQ(rejected(g, SampleVerdict::kNonFinite), 2u);
+  EXPECT_EQ(rejected(g, SampleVerdict::kOutOfRange), 1u);
+  EXPECT_EQ(rejected(g, SampleVerdict::kDuplicate), 1u);
+  EXPECT_EQ(rejected(g, SampleVerdict::kTimeBackward), 1u);
+  EXPECT_EQ(rejected(g, SampleVerdict::kTimeJump), 1u);
+  EXPECT_EQ(g.counters().received, g.counters().accepted + 6u);
+}
+
+TEST(SampleGate, MissingSamplesFromSequenceGaps) {
+  SampleGate g;
+  g.check(0, at(0));
+  g.check(1, at(10 * kMs));
+  g.check(5, at(50 * kMs));  // 2, 3, 4 lost
+  EXPECT_EQ(g.counters().missing, 3u);
+  EXPECT_EQ(g.counters().accepted, 3u);
+}
+
+TEST(SampleGate, AdoptsANewTimeBaseAfterConsistentSamples) {
+  SampleGate::Params p;
+  p.rebase_after = 5;
+  SampleGate g(p);
+  for (std::uint64_t k = 0; k < 10; ++k) g.check(k, at(1'000'000 * kMs + k * 10 * kMs));
+  // The node reboots: its clock restarts near zero and keeps going.
+  for (std::uint64_t k = 0; k < 4; ++k) EXPECT_EQ(g.check(k, at(k * 10 * kMs)), SampleVerdict::kTimeBackward);
+  EXPECT_EQ(g.check(4, at(40 * kMs)), SampleVerdict::kAcceptedClockReset);
+  EXPECT_EQ(g.check(5, at(50 * kMs)), SampleVerdict::kAccepted);
+  EXPECT_EQ(g.counters().clock_resets, 1u);
+  EXPECT_EQ(rejected(g, SampleVerdict::kTimeBackward), 4u);
+}
+
+TEST(SampleGate, ScatteredBadTimestampsNeverBecomeATimeBase) {
+  SampleGate g;
+  std::uint64_t t = 0;
+  for (std::uint64_t k = 0; k < 200; ++k) {
+    t += 10 * kMs;
+    if (k % 3 == 1) {
+      EXPECT_EQ(g.check(k, at(t + 5'000'000 * kMs)), SampleVerdict::kTimeJump);  // lone glitches, far apart
+    } else {
+      EXPECT_EQ(g.check(k, at(t)), SampleVerdict::kAccepted);
+    }
+  }
+  EXPECT_EQ(g.counters().clock_resets, 0u);
+}
+
+TEST(SampleGate, MissingChannelsAreNotJudged) {
+  SampleGate g;
+  ImuSample s = at(0);
+  s.has_mag = false;
+  s.mag = Vec3::Constant(std::nan(""));
+  EXPECT_EQ(g.check(0, s), SampleVerdict::kAccepted);
+}
+
+TEST(SampleGate, RejectsNonsenseParameters) {
+  SampleGate::Params p;
+  p.max_forward_jump_s = 0.0;
+  EXPECT_THROW(SampleGate{p}, std::invalid_argument);
+  p = {};
+  p.rebase_after = 0;
+  EXPECT_THROW(SampleGate{p}, std::invalid_argument);
+}
+
+TEST(SampleGate, ReasonNamesAreStable) {
+  // These names are on the wire (bsn/status); changing them breaks subscribers.
+  EXPECT_EQ(rejection_reason_name(0), "non_finite");
+  EXPECT_EQ(rejection_reason_name(1), "out_of_range");
+  EXPECT_EQ(rejection_reason_name(2), "time_backward");
+  EXPECT_EQ(rejection_reason_name(3), "time_jump");
+  EXPECT_EQ(rejection_reason_name(4), "duplicate");
+}
+
+}  // namespace
+}  // namespace bsn::fusion
