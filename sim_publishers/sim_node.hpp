@@ -8,12 +8,12 @@
 namespace bsn::sim {
 
 struct SimNodeOptions {
-  std::string node;            ///< node_id on bsn/raw
-  std::string segment;         ///< segment name on bsn/truth/orientation ("" = node id)
-  double rate_hz = 100.0;      ///< sample rate, Hz
-  std::uint64_t seed = 0;      ///< motion and noise seed; 0 = derived from the node id
-  double duration_s = 0.0;     ///< stop after this long, s (0 = until SIGINT/SIGTERM)
-  bool ideal = false;          ///< no sensor noise
+  std::string node;         ///< node_id on bsn/raw
+  std::string segment;      ///< segment name on bsn/truth/orientation ("" = node id)
+  double rate_hz = 100.0;   ///< sample rate, Hz
+  std::uint64_t seed = 0;   ///< motion and noise seed; 0 = derived from the node id
+  double duration_s = 0.0;  ///< stop after this long, s (0 = until SIGINT/SIGTERM)
+  bool ideal = false;       ///< no sensor noise
   int domain = 0;
 };
 

@@ -30,12 +30,12 @@ std::optional<BodyModelProblem> check_body_model(const BodyModel& body) {
       return BodyModelProblem{i, "segment '" + s.name + "': names are limited to 63 characters"};
     }
     if (auto [it, fresh] = by_name.emplace(s.name, i); !fresh) {
-      return BodyModelProblem{i, "duplicate segment '" + s.name + "' (first defined in entry " +
-                                     std::to_string(it->second + 1) + ")"};
+      return BodyModelProblem{
+          i, "duplicate segment '" + s.name + "' (first defined in entry " + std::to_string(it->second + 1) + ")"};
     }
     if (auto [it, fresh] = by_node.emplace(s.node, i); !fresh) {
-      return BodyModelProblem{i, "node '" + s.node + "' is already on segment '" +
-                                     body.segments[it->second].name + "'"};
+      return BodyModelProblem{i,
+                              "node '" + s.node + "' is already on segment '" + body.segments[it->second].name + "'"};
     }
   }
   for (std::size_t i = 0; i < body.segments.size(); ++i) {

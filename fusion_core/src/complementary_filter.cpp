@@ -9,8 +9,8 @@ namespace {
 
 void require_positive(double value, const char* name) {
   if (!std::isfinite(value) || value <= 0.0) {
-    throw std::invalid_argument(std::string("complementary: parameter ") + name +
-                                " must be a finite value > 0, got " + std::to_string(value));
+    throw std::invalid_argument(std::string("complementary: parameter ") + name + " must be a finite value > 0, got " +
+                                std::to_string(value));
   }
 }
 
@@ -41,8 +41,8 @@ ComplementaryFilter::ComplementaryFilter(const Params& params) : params_(params)
 UpdateResult ComplementaryFilter::initialise(const ImuSample& s) {
   // An orientation needs at least the direction of gravity.
   if (!s.has_acc || s.acc.norm() < 1e-6) return UpdateResult::kRejected;
-  const bool mag_usable = s.has_mag && s.mag.cross(s.acc).norm() > 1e-6 * s.mag.norm() * s.acc.norm() &&
-                          s.mag.norm() > 1e-9;
+  const bool mag_usable =
+      s.has_mag && s.mag.cross(s.acc).norm() > 1e-6 * s.mag.norm() * s.acc.norm() && s.mag.norm() > 1e-9;
   state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
   state_.mag_ref_norm = mag_usable ? s.mag.norm() : 0.0;
   state_.initialised = true;

@@ -6,9 +6,7 @@
 namespace bsn::fusion {
 namespace {
 
-Quat axis_rotation(int axis, double angle) {
-  return Quat(Eigen::AngleAxisd(angle, Vec3::Unit(axis)));
-}
+Quat axis_rotation(int axis, double angle) { return Quat(Eigen::AngleAxisd(angle, Vec3::Unit(axis))); }
 
 }  // namespace
 
@@ -23,7 +21,8 @@ YawPitchRoll to_yaw_pitch_roll(const Quat& q) {
 
 std::string AxisSequence::name() const {
   std::string s(3, 'x');
-  for (int i = 0; i < 3; ++i) s[static_cast<std::size_t>(i)] = static_cast<char>('x' + axes[static_cast<std::size_t>(i)]);
+  for (int i = 0; i < 3; ++i)
+    s[static_cast<std::size_t>(i)] = static_cast<char>('x' + axes[static_cast<std::size_t>(i)]);
   return s;
 }
 

@@ -47,6 +47,11 @@ SampleGate::SampleGate(const Params& params) : params_(params) {
 
 SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
   ++counters_.received;
+  // Lost samples are the sequence numbers never seen, rejected or not; a lower number (reordering, a node
+  // restarting its count) is not a loss.
+  if (seen_any_ && seq > max_seq_seen_ + 1) counters_.missing += seq - max_seq_seen_ - 1;
+  if (!seen_any_ || seq > max_seq_seen_) max_seq_seen_ = seq;
+  seen_any_ = true;
   SampleVerdict verdict = SampleVerdict::kAccepted;
   if (!s.finite()) {
     verdict = SampleVerdict::kNonFinite;
@@ -63,7 +68,6 @@ SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
   } else if (s.timestamp_ns - last_ns_ > max_jump_ns_) {
     return reject_time(SampleVerdict::kTimeJump, seq, s.timestamp_ns);
   } else {
-    if (seq > last_seq_ + 1) counters_.missing += seq - last_seq_ - 1;
     return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
   }
   ++counters_.rejected[static_cast<std::size_t>(rejection_index(verdict))];
@@ -80,6 +84,7 @@ SampleVerdict SampleGate::reject_time(SampleVerdict reason, std::uint64_t seq, s
   candidate_ns_ = t_ns;
   if (candidate_count_ >= params_.rebase_after) {
     ++counters_.clock_resets;
+    max_seq_seen_ = seq;  // a rebooted node restarts its sequence too
     return accept(SampleVerdict::kAcceptedClockReset, seq, t_ns);
   }
   ++counters_.rejected[static_cast<std::size_t>(rejection_index(reason))];

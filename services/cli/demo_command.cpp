@@ -109,12 +109,13 @@ int run_demo(const DemoOptions& opt) {
           v.latest = j;
           ++v.count;
         });
-    auto status_reader = participant.make_reader<bsn::Status>(
-        dds::kStatusTopic, dds::TopicQos::kLatched, [&view](const bsn::Status& s, const eprosima::fastdds::dds::SampleInfo&) {
-          std::lock_guard lock(view.mutex);
-          view.status = s;
-          view.have_status = true;
-        });
+    auto status_reader =
+        participant.make_reader<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched,
+                                             [&view](const bsn::Status& s, const eprosima::fastdds::dds::SampleInfo&) {
+                                               std::lock_guard lock(view.mutex);
+                                               view.status = s;
+                                               view.have_status = true;
+                                             });
 
     std::vector<std::unique_ptr<dds::ChildProcess>> sims;
     std::unique_ptr<dds::ChildProcess> fusion_process;

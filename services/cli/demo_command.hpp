@@ -5,9 +5,9 @@
 namespace bsn::services {
 
 struct DemoOptions {
-  double duration_s = 0.0;   ///< stop after this long, s (0 = until Ctrl-C)
-  std::string body_path;     ///< "" = default 7-segment lower body
-  double rate_hz = 100.0;    ///< sample rate of the simulated nodes
+  double duration_s = 0.0;  ///< stop after this long, s (0 = until Ctrl-C)
+  std::string body_path;    ///< "" = default 7-segment lower body
+  double rate_hz = 100.0;   ///< sample rate of the simulated nodes
   int domain = 0;
 };
 

@@ -26,7 +26,8 @@ struct Printer {
     std::lock_guard lock(mutex);
     if (opt.count > 0 && printed.load() >= opt.count) return;
     const auto now = Clock::now();
-    if (opt.rate_hz > 0.0 && printed.load() > 0 && now - last_print < std::chrono::duration<double>(1.0 / opt.rate_hz)) {
+    if (opt.rate_hz > 0.0 && printed.load() > 0 &&
+        now - last_print < std::chrono::duration<double>(1.0 / opt.rate_hz)) {
       return;
     }
     last_print = now;
@@ -80,8 +81,8 @@ int run_echo(const EchoOptions& opt) {
     reader = subscribe<bsn::CalibrationRequest>(participant, dds::kCalibrationRequestTopic, dds::TopicQos::kCommand,
                                                 printer);
   } else if (t == dds::kCalibrationResultTopic) {
-    reader = subscribe<bsn::CalibrationResult>(participant, dds::kCalibrationResultTopic, dds::TopicQos::kLatched,
-                                               printer);
+    reader =
+        subscribe<bsn::CalibrationResult>(participant, dds::kCalibrationResultTopic, dds::TopicQos::kLatched, printer);
   } else {
     std::fprintf(stderr, "bsn echo: error: unknown topic '%s' (known: %s)\n", t.c_str(), echo_topic_list().c_str());
     return 2;

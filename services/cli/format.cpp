@@ -52,8 +52,8 @@ std::string format_sample(const bsn::RawSample& s) {
   if (!(s.channels() & bsn::CHANNEL_ACC)) missing += " no-acc";
   if (!(s.channels() & bsn::CHANNEL_GYR)) missing += " no-gyr";
   if (!(s.channels() & bsn::CHANNEL_MAG)) missing += " no-mag";
-  return "raw " + s.node_id() + printf_string(" seq=%llu t=%.6fs", static_cast<unsigned long long>(s.seq()),
-                                              seconds(s.timestamp_ns())) +
+  return "raw " + s.node_id() +
+         printf_string(" seq=%llu t=%.6fs", static_cast<unsigned long long>(s.seq()), seconds(s.timestamp_ns())) +
          " acc=" + vec3(s.acc()) + " m/s2 gyr=" + vec3(s.gyr(), kDeg) + " deg/s mag=" + vec3(s.mag()) + " uT" + missing;
 }
 
@@ -81,11 +81,12 @@ std::string format_sample(const bsn::Status& s) {
                                   static_cast<unsigned long long>(s.qos_mismatches()),
                                   static_cast<unsigned long long>(s.write_failures()));
   for (const auto& n : s.nodes()) {
-    out += "\n  " + n.node_id() + " (" + n.segment() + ")" +
-           printf_string(" %6.1f Hz received=%llu accepted=%llu missing=%llu clock_resets=%llu%s rejected:", n.rate_hz(),
-                         static_cast<unsigned long long>(n.received()), static_cast<unsigned long long>(n.accepted()),
-                         static_cast<unsigned long long>(n.missing()), static_cast<unsigned long long>(n.clock_resets()),
-                         n.stale() ? " STALE" : "");
+    out +=
+        "\n  " + n.node_id() + " (" + n.segment() + ")" +
+        printf_string(" %6.1f Hz received=%llu accepted=%llu missing=%llu clock_resets=%llu%s rejected:", n.rate_hz(),
+                      static_cast<unsigned long long>(n.received()), static_cast<unsigned long long>(n.accepted()),
+                      static_cast<unsigned long long>(n.missing()), static_cast<unsigned long long>(n.clock_resets()),
+                      n.stale() ? " STALE" : "");
     for (const auto& r : n.rejected()) out += " " + r.reason() + "=" + std::to_string(r.count());
   }
   return out;

@@ -1,6 +1,5 @@
 // `bsn`: one program, one subcommand per process role (like git).
 #include <CLI/CLI.hpp>
-
 #include <cstdio>
 
 #include "bsn/dds/log.hpp"
@@ -38,14 +37,16 @@ int main(int argc, char** argv) {
   auto* fusion_cmd = app.add_subcommand("fusion", "Fusion service: one filter per body segment");
   fusion_cmd->add_option("--body", fusion.body_path, "YAML body model (default: 7-segment lower body)");
   fusion_cmd->add_flag("--print-body", fusion.print_body, "print the body model in effect as YAML and exit");
-  fusion_cmd->add_option("--stale-timeout", fusion.service.stale_timeout_s, "seconds without samples before a node is stale")
+  fusion_cmd
+      ->add_option("--stale-timeout", fusion.service.stale_timeout_s, "seconds without samples before a node is stale")
       ->capture_default_str();
   fusion_cmd->add_option("--status-period", fusion.service.status_period_s, "seconds between bsn/status samples")
       ->capture_default_str();
   fusion_cmd->add_flag("--best-effort", fusion.service.best_effort,
                        "publish orientations and joint angles BEST_EFFORT instead of RELIABLE");
-  fusion_cmd->add_option("--max-time-jump", fusion.service.gate.max_forward_jump_s,
-                         "a sensor timestamp more than S seconds ahead is rejected as a jump")
+  fusion_cmd
+      ->add_option("--max-time-jump", fusion.service.gate.max_forward_jump_s,
+                   "a sensor timestamp more than S seconds ahead is rejected as a jump")
       ->capture_default_str();
   add_domain_option(fusion_cmd, fusion.domain);
 

@@ -138,8 +138,7 @@ void FusionService::tick() {
   bool changed = false;
   for (auto& seg : segments_) {
     // A node that never sent gets a grace period for discovery before it counts as stale.
-    const bool silent = seg.ever_received ? now - seg.last_arrival > stale_after
-                                          : now - started_ > kDiscoveryGrace;
+    const bool silent = seg.ever_received ? now - seg.last_arrival > stale_after : now - started_ > kDiscoveryGrace;
     if (silent && !seg.stale) {
       seg.stale = true;
       changed = true;

@@ -63,6 +63,8 @@ TEST(SampleGate, CountsEachRejectionByReasonAndRecovers) {
   EXPECT_EQ(rejected(g, SampleVerdict::kTimeBackward), 1u);
   EXPECT_EQ(rejected(g, SampleVerdict::kTimeJump), 1u);
   EXPECT_EQ(g.counters().received, g.counters().accepted + 6u);
+  // Rejected samples arrived: they are not lost.
+  EXPECT_EQ(g.counters().missing, 0u);
 }
 
 TEST(SampleGate, MissingSamplesFromSequenceGaps) {
@@ -72,6 +74,8 @@ TEST(SampleGate, MissingSamplesFromSequenceGaps) {
   g.check(5, at(50 * kMs));  // 2, 3, 4 lost
   EXPECT_EQ(g.counters().missing, 3u);
   EXPECT_EQ(g.counters().accepted, 3u);
+  g.check(3, at(40 * kMs));  // late arrival of a sample counted missing: rejected, and no new loss
+  EXPECT_EQ(g.counters().missing, 3u);
 }
 
 TEST(SampleGate, AdoptsANewTimeBaseAfterConsistentSamples) {

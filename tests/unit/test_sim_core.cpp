@@ -44,13 +44,14 @@ TEST(SimCore, IdealChannelsAreRotatedGravityAndField) {
 TEST(SimCore, EarthFieldHasTheConfiguredMagnitudeAndDip) {
   const Vec3 f = EarthField{50.0, 60.0}.vector_enu();
   EXPECT_NEAR(f.norm(), 50.0, 1e-12);
-  EXPECT_NEAR(f.x(), 0.0, 1e-12);  // points to magnetic north
+  EXPECT_NEAR(f.x(), 0.0, 1e-12);                                                  // points to magnetic north
   EXPECT_NEAR(std::atan2(-f.z(), f.y()) * 180.0 / std::numbers::pi, 60.0, 1e-12);  // down in the north
 }
 
 TEST(SimCore, SameSeedSameNoiseOtherSeedOtherNoise) {
   const SinusoidalRotation motion = SinusoidalRotation::from_seed(7);
-  MimuSynthesizer a(EarthField{}, WhiteNoise{}, 42), b(EarthField{}, WhiteNoise{}, 42), c(EarthField{}, WhiteNoise{}, 43);
+  MimuSynthesizer a(EarthField{}, WhiteNoise{}, 42), b(EarthField{}, WhiteNoise{}, 42),
+      c(EarthField{}, WhiteNoise{}, 43);
   bool differs = false;
   for (int k = 0; k < 100; ++k) {
     const MotionState m = motion.at(k * 0.01);

@@ -21,9 +21,7 @@ class Parser {
  public:
   explicit Parser(std::string source) : source_(std::move(source)) {}
 
-  [[noreturn]] void fail(const YAML::Node& at, const std::string& what) const {
-    fail_at(at.Mark().line + 1, what);
-  }
+  [[noreturn]] void fail(const YAML::Node& at, const std::string& what) const { fail_at(at.Mark().line + 1, what); }
   [[noreturn]] void fail_at(int line, const std::string& what) const {
     throw ConfigError(source_ + ":" + std::to_string(line) + ": " + what);
   }

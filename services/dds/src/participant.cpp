@@ -1,10 +1,10 @@
 #include "bsn/dds/participant.hpp"
 
-#include <cstdlib>
-#include <stdexcept>
-
-#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+
+#include <cstdlib>
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <stdexcept>
 
 #include "bsn/dds/log.hpp"
 
@@ -82,9 +82,10 @@ Participant::Participant(const Options& options) {
   if (options.domain < 0 || options.domain > 232) {
     throw std::runtime_error("DDS domain id " + std::to_string(options.domain) + " is outside 0..232");
   }
-  participant_ = DomainParticipantFactory::get_instance()->create_participant(
-      static_cast<DomainId_t>(options.domain), participant_qos(options.name));
-  if (!participant_) throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options.domain));
+  participant_ = DomainParticipantFactory::get_instance()->create_participant(static_cast<DomainId_t>(options.domain),
+                                                                              participant_qos(options.name));
+  if (!participant_)
+    throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options.domain));
   publisher_ = participant_->create_publisher(PUBLISHER_QOS_DEFAULT);
   subscriber_ = participant_->create_subscriber(SUBSCRIBER_QOS_DEFAULT);
   if (!publisher_ || !subscriber_) throw std::runtime_error("cannot create a DDS publisher or subscriber");

@@ -8,6 +8,18 @@ using namespace eprosima::fastdds::dds;
 
 namespace {
 
+// Every bsn topic is keyed (one instance per node, segment, joint or process). The Fast DDS default resource
+// limits (max_instances 10, max_samples 5000) silently drop the 11th instance, so a body of more than 10 nodes
+// loses segments. LENGTH_UNLIMITED does not work either in Fast DDS 2.9.1: a KEEP_LAST history is sized
+// depth * max_instances, which goes negative, and then nothing is delivered, without any error.
+constexpr int kMaxInstances = 4096;
+
+void set_limits(eprosima::fastdds::dds::ResourceLimitsQosPolicy& r, int depth) {
+  r.max_instances = kMaxInstances;
+  r.max_samples_per_instance = depth;
+  r.max_samples = kMaxInstances * depth;  // consistent: max_samples >= max_instances * max_samples_per_instance
+}
+
 struct Delivery {
   ReliabilityQosPolicyKind reliability;
   DurabilityQosPolicyKind durability;
@@ -40,6 +52,7 @@ DataWriterQos writer_qos(TopicQos kind) {
   q.durability().kind = d.durability;
   q.history().kind = KEEP_LAST_HISTORY_QOS;
   q.history().depth = d.writer_depth;
+  set_limits(q.resource_limits(), d.writer_depth);
   // Data is written from the caller's thread: lowest latency, and no extra thread per writer.
   q.publish_mode().kind = SYNCHRONOUS_PUBLISH_MODE;
   return q;
@@ -50,10 +63,11 @@ DataReaderQos reader_qos(TopicQos kind) {
   DataReaderQos q = DATAREADER_QOS_DEFAULT;
   // A best-effort reader matches writers of either kind; only latched and command topics need reliability.
   q.reliability().kind = (kind == TopicQos::kLatched || kind == TopicQos::kCommand) ? RELIABLE_RELIABILITY_QOS
-                                                                                     : BEST_EFFORT_RELIABILITY_QOS;
+                                                                                    : BEST_EFFORT_RELIABILITY_QOS;
   q.durability().kind = d.durability;
   q.history().kind = KEEP_LAST_HISTORY_QOS;
   q.history().depth = d.reader_depth;
+  set_limits(q.resource_limits(), d.reader_depth);
   return q;
 }
 

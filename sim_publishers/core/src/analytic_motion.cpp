@@ -40,15 +40,14 @@ SinusoidalRotation SinusoidalRotation::from_seed(std::uint64_t seed) {
 }
 
 MotionState SinusoidalRotation::at(double t) const {
-  const AngleRate yaw = evaluate(params_.yaw, t), pitch = evaluate(params_.pitch, t),
-                  roll = evaluate(params_.roll, t);
+  const AngleRate yaw = evaluate(params_.yaw, t), pitch = evaluate(params_.pitch, t), roll = evaluate(params_.roll, t);
   MotionState m;
   m.q_sensor_to_earth = fusion::from_yaw_pitch_roll({yaw.angle, pitch.angle, roll.angle});
   // Body rate of the intrinsic z-y'-x'' rotation from the Euler angle rates.
   const double sp = std::sin(pitch.angle), cp = std::cos(pitch.angle);
   const double sr = std::sin(roll.angle), cr = std::cos(roll.angle);
-  m.angular_rate_sensor = Vec3(roll.rate - yaw.rate * sp, pitch.rate * cr + yaw.rate * cp * sr,
-                               -pitch.rate * sr + yaw.rate * cp * cr);
+  m.angular_rate_sensor =
+      Vec3(roll.rate - yaw.rate * sp, pitch.rate * cr + yaw.rate * cp * sr, -pitch.rate * sr + yaw.rate * cp * cr);
   m.linear_acc_earth = Vec3::Zero();
   return m;
 }

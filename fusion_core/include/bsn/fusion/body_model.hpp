@@ -13,12 +13,12 @@
 namespace bsn::fusion {
 
 struct SegmentSpec {
-  std::string name;           ///< unique segment name, e.g. "thigh_l"
-  std::string node;           ///< node_id of the sensor on this segment; unique across segments
-  std::string parent;         ///< parent segment name, "" for a root
-  std::string joint;          ///< name of the joint parent -> this segment, e.g. "hip_l"; "" = "<parent>-<name>"
-  AxisSequence joint_axes;    ///< rotation sequence the joint angles are decomposed in (default z-y'-x'')
-  FilterSpec filter;          ///< filter for this segment
+  std::string name;         ///< unique segment name, e.g. "thigh_l"
+  std::string node;         ///< node_id of the sensor on this segment; unique across segments
+  std::string parent;       ///< parent segment name, "" for a root
+  std::string joint;        ///< name of the joint parent -> this segment, e.g. "hip_l"; "" = "<parent>-<name>"
+  AxisSequence joint_axes;  ///< rotation sequence the joint angles are decomposed in (default z-y'-x'')
+  FilterSpec filter;        ///< filter for this segment
 };
 
 struct BodyModel {

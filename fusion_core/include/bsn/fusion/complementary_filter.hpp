@@ -46,13 +46,13 @@ class ComplementaryFilter final : public OrientationFilter {
   };
 
   struct State {
-    Quat q = Quat::Identity();     ///< sensor-to-earth
+    Quat q = Quat::Identity();  ///< sensor-to-earth
     bool initialised = false;
-    std::uint64_t last_ns = 0;     ///< timestamp of the last used sample
-    std::uint64_t init_ns = 0;     ///< timestamp of the last (re)initialisation
+    std::uint64_t last_ns = 0;         ///< timestamp of the last used sample
+    std::uint64_t init_ns = 0;         ///< timestamp of the last (re)initialisation
     std::uint64_t still_since_ns = 0;  ///< start of the current still period
     bool still = false;
-    double mag_ref_norm = 0.0;     ///< |mag| at initialisation, uT; 0 = not known yet
+    double mag_ref_norm = 0.0;  ///< |mag| at initialisation, uT; 0 = not known yet
     FilterFlags flags;
   };
 

@@ -14,17 +14,17 @@ namespace bsn::fusion {
 
 /// Why the filter did what it did at the last update.
 struct FilterFlags {
-  bool resting = false;           ///< the sensor has been still for the rest time
-  bool mag_rejected = false;      ///< the magnetometer was present but not used (disturbed or degenerate)
-  bool initialising = false;      ///< within the start-up period after (re)initialisation
-  bool reinitialised = false;     ///< this update re-initialised the state (first sample, long gap)
+  bool resting = false;        ///< the sensor has been still for the rest time
+  bool mag_rejected = false;   ///< the magnetometer was present but not used (disturbed or degenerate)
+  bool initialising = false;   ///< within the start-up period after (re)initialisation
+  bool reinitialised = false;  ///< this update re-initialised the state (first sample, long gap)
 };
 
 enum class UpdateResult {
-  kUpdated,        ///< the state advanced with this sample
-  kInitialised,    ///< the state was (re)initialised from this sample
-  kRejected,       ///< the sample was not used and the state is unchanged (non-finite, time not advancing,
-                   ///< or no accelerometer to initialise from)
+  kUpdated,      ///< the state advanced with this sample
+  kInitialised,  ///< the state was (re)initialised from this sample
+  kRejected,     ///< the sample was not used and the state is unchanged (non-finite, time not advancing,
+                 ///< or no accelerometer to initialise from)
 };
 
 class OrientationFilter {

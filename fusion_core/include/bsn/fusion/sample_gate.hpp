@@ -50,8 +50,8 @@ class SampleGate {
   struct Counters {
     std::uint64_t received = 0;
     std::uint64_t accepted = 0;
-    std::uint64_t missing = 0;       ///< samples lost, from jumps in the sequence number
-    std::uint64_t clock_resets = 0;  ///< new time bases adopted
+    std::uint64_t missing = 0;                                    ///< samples lost, from jumps in the sequence number
+    std::uint64_t clock_resets = 0;                               ///< new time bases adopted
     std::array<std::uint64_t, kRejectionReasonCount> rejected{};  ///< by rejection_index()
   };
 
@@ -75,7 +75,9 @@ class SampleGate {
   bool have_last_ = false;
   std::uint64_t last_seq_ = 0;
   std::uint64_t last_ns_ = 0;
-  int candidate_count_ = 0;  ///< consecutive samples on a candidate new time base
+  bool seen_any_ = false;
+  std::uint64_t max_seq_seen_ = 0;  ///< highest sequence number received, for the missing count
+  int candidate_count_ = 0;         ///< consecutive samples on a candidate new time base
   std::uint64_t candidate_ns_ = 0;
 };
 

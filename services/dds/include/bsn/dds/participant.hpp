@@ -4,13 +4,6 @@
 
 #include <atomic>
 #include <cstdint>
-#include <functional>
-#include <map>
-#include <memory>
-#include <mutex>
-#include <string>
-#include <vector>
-
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/publisher/DataWriter.hpp>
 #include <fastdds/dds/publisher/DataWriterListener.hpp>
@@ -21,6 +14,12 @@
 #include <fastdds/dds/subscriber/Subscriber.hpp>
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
 
 #include "bsn/dds/topics.hpp"
 #include "bsn_idl/bsnPubSubTypes.h"
@@ -102,8 +101,8 @@ class Reader {
 class Participant {
  public:
   struct Options {
-    int domain = 0;              ///< DDS domain id (0..232); every test uses its own
-    std::string name = "bsn";    ///< participant name shown by DDS tools
+    int domain = 0;            ///< DDS domain id (0..232); every test uses its own
+    std::string name = "bsn";  ///< participant name shown by DDS tools
   };
 
   /// Throws std::runtime_error if the participant cannot be created.
@@ -120,8 +119,9 @@ class Participant {
   }
 
   template <class T>
-  std::unique_ptr<Reader<T>> make_reader(const std::string& topic_name, TopicQos qos,
-                                         std::function<void(const T&, const eprosima::fastdds::dds::SampleInfo&)> on_sample) {
+  std::unique_ptr<Reader<T>> make_reader(
+      const std::string& topic_name, TopicQos qos,
+      std::function<void(const T&, const eprosima::fastdds::dds::SampleInfo&)> on_sample) {
     auto events = std::make_shared<EndpointEvents>();
     auto take_all = [cb = std::move(on_sample)](eprosima::fastdds::dds::DataReader* reader) {
       T sample;

@@ -17,11 +17,11 @@ inline constexpr const char* kTruthOrientationTopic = "bsn/truth/orientation";
 
 /// How a topic is delivered.
 enum class TopicQos {
-  kSensorData,   ///< BEST_EFFORT, VOLATILE, KEEP_LAST (raw samples)
-  kEstimate,     ///< RELIABLE writer (every reader kind matches), VOLATILE, KEEP_LAST 1 per instance
+  kSensorData,          ///< BEST_EFFORT, VOLATILE, KEEP_LAST (raw samples)
+  kEstimate,            ///< RELIABLE writer (every reader kind matches), VOLATILE, KEEP_LAST 1 per instance
   kEstimateBestEffort,  ///< BEST_EFFORT variant of kEstimate (lower overhead, lossy)
-  kLatched,      ///< RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1: late joiners get the latest (status, results)
-  kCommand,      ///< RELIABLE, VOLATILE, KEEP_LAST 16 (calibration requests)
+  kLatched,             ///< RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1: late joiners get the latest (status, results)
+  kCommand,             ///< RELIABLE, VOLATILE, KEEP_LAST 16 (calibration requests)
 };
 
 eprosima::fastdds::dds::DataWriterQos writer_qos(TopicQos kind);

@@ -19,9 +19,9 @@ struct EarthField {
 
 /// White noise standard deviation per sample of each channel (0 = exact).
 struct WhiteNoise {
-  double gyr_rad_s = 0.005;   ///< rad/s
-  double acc_m_s2 = 0.02;     ///< m/s^2
-  double mag_ut = 0.3;        ///< uT
+  double gyr_rad_s = 0.005;  ///< rad/s
+  double acc_m_s2 = 0.02;    ///< m/s^2
+  double mag_ut = 0.3;       ///< uT
   static WhiteNoise none() { return {0.0, 0.0, 0.0}; }
 };
 

@@ -1,0 +1,88 @@
+// `bsn demo`: starts fusion and seven sims itself, prints joint angles, stops everything and leaves nothing behind.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <csignal>
+#include <cstdio>
+#include <regex>
+#include <string>
+#include <thread>
+
+#include "process_fixture.hpp"
+
+namespace bsn::integration {
+namespace {
+
+using namespace std::chrono_literals;
+
+class DemoCommand : public ProcessTest {};
+
+/// True for a Fast DDS shared-memory port file or port semaphore ("fastrtps_port14160", "sem.fastrtps_port14160_mutex")
+/// of a port outside `domain`'s range (7400 + 250 * domain + [0, 250)): another domain's, so not ours.
+bool foreign_domain_port_entry(const std::string& name, int domain) {
+  std::smatch m;
+  static const std::regex port(R"(fastrtps_port(\d+))");
+  if (!std::regex_search(name, m, port)) return false;
+  const long p = std::stol(m[1].str());
+  const long base = 7400 + 250L * domain;
+  return p < base || p >= base + 250;
+}
+
+TEST_F(DemoCommand, Demo) {
+  constexpr int kDomain = 27;
+  const std::set<std::string> shm_before = directory_entries("/dev/shm");
+
+  auto& demo = spawn("demo", {"demo", "--duration", "20", "--domain", std::to_string(kDomain)});
+  // While it runs, neither the demo nor its children (fusion, seven sims) may map or open anything in /dev/shm.
+  std::set<std::string> shm_used;
+  std::size_t most_children = 0;
+  const auto deadline = Clock::now() + 60s;  // 20 s of demo plus start-up and shutdown
+  while (demo.running() && Clock::now() < deadline) {
+    const std::vector<int> children = children_of(demo.pid());
+    most_children = std::max(most_children, children.size());
+    shm_used.merge(shm_entries_used_by(demo.pid()));
+    for (int c : children) shm_used.merge(shm_entries_used_by(c));
+    std::this_thread::sleep_for(250ms);
+  }
+  const auto st = demo.wait_for(1s);
+  ASSERT_TRUE(st.has_value()) << "bsn demo --duration 20 still runs after 60 s";
+  EXPECT_TRUE(exited_cleanly(st)) << "bsn demo " << describe_status(st);
+  EXPECT_EQ(most_children, 8u) << "child processes of the demo seen at once (fusion + 7 sims)";
+  EXPECT_TRUE(shm_used.empty()) << "the demo's processes used shared memory: " << ::testing::PrintToString(shm_used);
+
+  const std::string out = read_file(log_path("demo"));
+  std::smatch m;
+  const std::regex summary(R"(bsn demo: (\d+) joint-angle samples from (\d+) of (\d+) joints)");
+  ASSERT_TRUE(std::regex_search(out, m, summary)) << "no summary line in the demo's output";
+  EXPECT_GT(std::stoull(m[1].str()), 0u);
+  EXPECT_EQ(m[2].str(), "6");
+  EXPECT_EQ(m[3].str(), "6");
+  // Joint-angle rows of the live view, e.g. "hip_l      pelvis -> thigh_l     zyx     1.23 ...".
+  EXPECT_TRUE(std::regex_search(out, std::regex(R"(\n(hip|knee|ankle)_[lr] +\S+ -> \S+ +[xyz]{3} +-?\d+\.\d\d)")))
+      << "no joint-angle line in the demo's output";
+
+  // Nothing the demo started is left: no bsn process of this domain (its children were reparented if alive).
+  std::vector<std::pair<int, std::string>> left;
+  wait_until([&] { return (left = bsn_processes_in_domain(kDomain)).empty(); }, 2s);
+  for (const auto& [pid, cmd] : left) {
+    ADD_FAILURE() << "process " << pid << " left behind: " << cmd;
+    ::kill(pid, SIGKILL);  // ours (this domain); do not leave it running
+  }
+
+  // UDP only: no new entry in /dev/shm. Other users of this host may run Fast DDS with shared memory at the same
+  // time; a new entry that a running process still uses, or a port file of another domain, is theirs (all of
+  // ours have ended).
+  std::vector<std::string> new_shm, foreign;
+  const std::set<std::string> in_use = shm_entries_in_use();
+  for (const auto& e : directory_entries("/dev/shm")) {
+    if (shm_before.contains(e)) continue;
+    (in_use.contains(e) || foreign_domain_port_entry(e, kDomain) ? foreign : new_shm).push_back(e);
+  }
+  EXPECT_TRUE(new_shm.empty()) << "new entries in /dev/shm: " << ::testing::PrintToString(new_shm);
+  if (!foreign.empty())
+    std::printf("[ note     ] new /dev/shm entries of other processes: %s\n",
+                ::testing::PrintToString(foreign).c_str());
+}
+
+}  // namespace
+}  // namespace bsn::integration
