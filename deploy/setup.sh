@@ -8,7 +8,7 @@ packages=(
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless  # Fast DDS 2.9 + IDL generator
   libeigen3-dev libyaml-cpp-dev libcli11-dev         # core math, configuration, command line
   libgtest-dev libgmock-dev libbenchmark-dev         # tests and benchmarks
-  procps                                             # pgrep/ps used by tests and docs
+  clang-format procps                                # formatting check in CI; ps for diagnostics
 )
 
 missing=()

@@ -915,10 +915,11 @@ int main(int argc, char** argv) {
 
   std::string buffers;
   {
-    std::ifstream in("/proc/sys/net/core/rmem_default");
-    std::uint64_t def = 0;
-    in >> def;
-    buffers = "UDP socket receive buffers: OS default " + std::to_string(def) + " bytes";
+    std::ifstream in("/proc/sys/net/core/rmem_max");
+    std::uint64_t max = 0;
+    in >> max;
+    buffers = "UDP socket receive buffers: bsn's default 4 MiB request, capped by net.core.rmem_max = " +
+              std::to_string(max) + " bytes";
   }
   if (opt.socket_buffer > 0) {
     // Set before the first DDS call: the participant factory reads the profile once. The fusion child inherits it.

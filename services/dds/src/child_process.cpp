@@ -34,6 +34,8 @@ ChildProcess::ChildProcess(const std::vector<std::string>& argv, const std::stri
         close(fd);
       }
     }
+    // Do not hand the parent's DDS sockets and files to the child.
+    close_range(3, ~0U, 0);
     execv(args[0], args.data());
     _exit(127);
   }

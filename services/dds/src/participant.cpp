@@ -14,6 +14,8 @@ using namespace eprosima::fastdds::dds;
 
 namespace {
 
+constexpr std::uint32_t kUdpReceiveBufferBytes = 4u * 1024u * 1024u;
+
 class WriterEvents final : public DataWriterListener {
  public:
   explicit WriterEvents(std::shared_ptr<EndpointEvents> ev) : events_(std::move(ev)) {}
@@ -53,7 +55,9 @@ class ReaderEvents final : public DataReaderListener {
 };
 
 DomainParticipantQos participant_qos(const std::string& name) {
-  // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies.
+  // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies; the
+  // factory reads the profiles lazily, so load them before asking for the default.
+  DomainParticipantFactory::get_instance()->load_profiles();
   DomainParticipantQos qos = DomainParticipantFactory::get_instance()->get_default_participant_qos();
   qos.name(name);
   if (std::getenv("FASTRTPS_DEFAULT_PROFILES_FILE") == nullptr) {
@@ -61,7 +65,11 @@ DomainParticipantQos participant_qos(const std::string& name) {
     // shared memory and UDP (fixed in 2.9.2), and shared memory leaves files in /dev/shm when a process is
     // killed. On loopback UDP costs a few microseconds, far below a 10 ms sample period.
     qos.transport().use_builtin_transports = false;
-    qos.transport().user_transports.push_back(std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>());
+    auto udp = std::make_shared<eprosima::fastdds::rtps::UDPv4TransportDescriptor>();
+    // Synchronised sensors arrive as one burst per tick; Linux's default 208 KiB socket buffer overflows at
+    // ~150 samples per burst. The kernel caps this request at net.core.rmem_max (see README, deployment).
+    udp->receiveBufferSize = kUdpReceiveBufferBytes;
+    qos.transport().user_transports.push_back(udp);
   }
   return qos;
 }
