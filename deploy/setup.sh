@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config git   # toolchain
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless  # Fast DDS 2.9 + IDL generator
-  libeigen3-dev libyaml-cpp-dev libcli11-dev         # core math, configuration, command line
+  libeigen3-dev libyaml-cpp-dev libcli11-dev libhdf5-dev  # core math, configuration, command line, HDF5 recordings
   libgtest-dev libgmock-dev libbenchmark-dev         # tests and benchmarks
   clang-format procps                                # formatting check in CI; ps for diagnostics
 )

@@ -4,15 +4,24 @@
 #include <stdexcept>
 #include <string>
 
+#include "bsn/fusion/filter_params.hpp"
+
 namespace bsn::fusion {
 namespace {
 
-void require_positive(double value, const char* name) {
-  if (!std::isfinite(value) || value <= 0.0) {
-    throw std::invalid_argument(std::string("complementary: parameter ") + name + " must be a finite value > 0, got " +
-                                std::to_string(value));
-  }
-}
+constexpr const char* kName = "complementary";
+
+constexpr ParamField<ComplementaryFilter::Params> kParams[] = {
+    {"tau_acc_s", &ComplementaryFilter::Params::tau_acc_s},
+    {"tau_mag_s", &ComplementaryFilter::Params::tau_mag_s},
+    {"max_gap_s", &ComplementaryFilter::Params::max_gap_s},
+    {"acc_rejection_m_s2", &ComplementaryFilter::Params::acc_rejection_m_s2},
+    {"mag_norm_tolerance", &ComplementaryFilter::Params::mag_norm_tolerance},
+    {"rest_gyr_rad_s", &ComplementaryFilter::Params::rest_gyr_rad_s},
+    {"rest_acc_m_s2", &ComplementaryFilter::Params::rest_acc_m_s2},
+    {"rest_min_s", &ComplementaryFilter::Params::rest_min_s},
+    {"init_period_s", &ComplementaryFilter::Params::init_period_s},
+};
 
 std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
 
@@ -22,15 +31,15 @@ double step_gain(double dt, double inv_tau) { return 1.0 - std::exp(-dt * inv_ta
 }  // namespace
 
 ComplementaryFilter::ComplementaryFilter(const Params& params) : params_(params) {
-  require_positive(params.tau_acc_s, "tau_acc_s");
-  require_positive(params.tau_mag_s, "tau_mag_s");
-  require_positive(params.max_gap_s, "max_gap_s");
-  require_positive(params.acc_rejection_m_s2, "acc_rejection_m_s2");
-  require_positive(params.mag_norm_tolerance, "mag_norm_tolerance");
-  require_positive(params.rest_gyr_rad_s, "rest_gyr_rad_s");
-  require_positive(params.rest_acc_m_s2, "rest_acc_m_s2");
-  require_positive(params.rest_min_s, "rest_min_s");
-  require_positive(params.init_period_s, "init_period_s");
+  require_positive(kName, params.tau_acc_s, "tau_acc_s");
+  require_positive(kName, params.tau_mag_s, "tau_mag_s");
+  require_positive(kName, params.max_gap_s, "max_gap_s");
+  require_positive(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
+  require_positive(kName, params.mag_norm_tolerance, "mag_norm_tolerance");
+  require_positive(kName, params.rest_gyr_rad_s, "rest_gyr_rad_s");
+  require_positive(kName, params.rest_acc_m_s2, "rest_acc_m_s2");
+  require_positive(kName, params.rest_min_s, "rest_min_s");
+  require_positive(kName, params.init_period_s, "init_period_s");
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
@@ -113,6 +122,10 @@ UpdateResult ComplementaryFilter::update(const ImuSample& s) {
   update_rest(s);
   state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
+}
+
+std::unique_ptr<OrientationFilter> make_complementary_filter(const FilterSpec& spec) {
+  return std::make_unique<ComplementaryFilter>(bind_parameters(kName, spec, kParams));
 }
 
 }  // namespace bsn::fusion

@@ -80,4 +80,7 @@ class ComplementaryFilter final : public OrientationFilter {
   State state_;
 };
 
+/// Factory entry: "complementary" with the Params fields as parameter names.
+std::unique_ptr<OrientationFilter> make_complementary_filter(const FilterSpec& spec);
+
 }  // namespace bsn::fusion

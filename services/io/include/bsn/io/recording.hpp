@@ -1,0 +1,63 @@
+// Recordings on disk: BROAD-layout HDF5 (read and write) and CSV (read). I/O only; the cores never see files.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bsn/fusion/imu_sample.hpp"
+
+namespace bsn::io {
+
+using RowsX3 = Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>;
+using RowsX4 = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>;
+
+/// A read or write failure; the message names the file and what is wrong.
+class IoError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// One sensor's recording in the BROAD layout (../shared/data/broad/README.md), in the project's units.
+struct Recording {
+  double sampling_rate_hz = 0.0;  ///< nominal rate, Hz
+  RowsX3 gyr;                     ///< rad/s, sensor frame, N x 3
+  RowsX3 acc;                     ///< m/s^2, sensor frame, N x 3
+  RowsX3 mag;                     ///< uT, sensor frame, N x 3; a row of NaN = no magnetometer sample
+  RowsX4 opt_quat;                ///< reference (w, x, y, z) sensor-to-earth ENU, N x 4 or empty; NaN = no reference
+  RowsX3 opt_pos;                 ///< marker position, m, N x 3 or empty
+  std::vector<std::uint8_t> movement;   ///< 1 where errors count, N or empty (= all)
+  std::vector<std::uint64_t> timestamp_ns;  ///< per-sample time, N or empty (= uniform at sampling_rate_hz)
+
+  std::size_t size() const { return static_cast<std::size_t>(gyr.rows()); }
+  /// Timestamp of sample i: the recorded one, or i / sampling_rate_hz.
+  std::uint64_t time_ns(std::size_t i) const;
+  /// Sample i as the filters take it (a NaN magnetometer row gives has_mag = false).
+  fusion::ImuSample sample(std::size_t i) const;
+  /// Throws IoError naming `source` if the sizes disagree or the rate is not positive.
+  void validate(const std::string& source) const;
+};
+
+/// Reads a BROAD-layout HDF5 file (imu_gyr, imu_acc, imu_mag, optional opt_quat, opt_pos, movement, attribute
+/// sampling_rate).
+Recording read_broad_hdf5(const std::string& path);
+
+/// Writes a recording in the BROAD layout; optional parts that are empty are left out.
+void write_broad_hdf5(const std::string& path, const Recording& rec);
+
+/// Reads a CSV recording. The first line is a header naming the columns, in any order:
+///   t_s or t_ns                  sample time (seconds as a decimal, or integer nanoseconds)   required
+///   acc_x, acc_y, acc_z          m/s^2                                                         required
+///   gyr_x, gyr_y, gyr_z          rad/s                                                         required
+///   mag_x, mag_y, mag_z          uT; empty cells = no magnetometer sample                      optional
+///   quat_w, quat_x, quat_y, quat_z   reference orientation, sensor-to-earth ENU                optional
+///   movement                     0/1, where errors count                                       optional
+/// Lines starting with '#' are comments. The sampling rate is the median sample interval's inverse.
+Recording read_csv(const std::string& path);
+
+/// Reads by extension: .csv as CSV, anything else as BROAD HDF5.
+Recording read_recording(const std::string& path);
+
+}  // namespace bsn::io

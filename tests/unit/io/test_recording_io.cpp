@@ -1,0 +1,117 @@
+// Recordings round-trip through BROAD-layout HDF5, and CSV files are read by their documented columns.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+
+#include "bsn/io/recording.hpp"
+
+namespace bsn::io {
+namespace {
+
+class TempDir {
+ public:
+  TempDir() {
+    char tmpl[] = "/tmp/bsn-io-test-XXXXXX";
+    path_ = mkdtemp(tmpl);
+  }
+  ~TempDir() { std::filesystem::remove_all(path_); }
+  std::string file(const std::string& name) const { return (path_ / name).string(); }
+
+ private:
+  std::filesystem::path path_;
+};
+
+Recording small_recording() {
+  Recording r;
+  r.sampling_rate_hz = 100.0;
+  r.gyr = RowsX3::Random(5, 3);
+  r.acc = RowsX3::Random(5, 3);
+  r.mag = RowsX3::Random(5, 3);
+  r.mag.row(2).setConstant(std::nan(""));
+  r.opt_quat = RowsX4::Random(5, 4);
+  r.movement = {0, 1, 1, 1, 0};
+  return r;
+}
+
+TEST(BroadHdf5, RoundTripIsExact) {
+  TempDir dir;
+  const Recording r = small_recording();
+  write_broad_hdf5(dir.file("a.hdf5"), r);
+  const Recording back = read_broad_hdf5(dir.file("a.hdf5"));
+  EXPECT_EQ(back.sampling_rate_hz, 100.0);
+  EXPECT_EQ(back.gyr, r.gyr);
+  EXPECT_EQ(back.acc, r.acc);
+  EXPECT_TRUE(back.mag.row(2).array().isNaN().all());
+  EXPECT_EQ(back.mag.row(3), r.mag.row(3));
+  EXPECT_EQ(back.opt_quat, r.opt_quat);
+  EXPECT_EQ(back.movement, r.movement);
+  EXPECT_EQ(back.opt_pos.rows(), 0);
+}
+
+TEST(BroadHdf5, SamplesCarryUniformTimeAndMissingMagnetometer) {
+  const Recording r = small_recording();
+  EXPECT_EQ(r.sample(3).timestamp_ns, 30'000'000u);
+  EXPECT_FALSE(r.sample(2).has_mag);
+  EXPECT_TRUE(r.sample(1).has_mag);
+}
+
+TEST(BroadHdf5, ErrorsNameTheFileAndTheProblem) {
+  TempDir dir;
+  try {
+    read_broad_hdf5(dir.file("missing.hdf5"));
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("missing.hdf5"), std::string::npos);
+  }
+  std::ofstream(dir.file("text.hdf5")) << "not hdf5";
+  EXPECT_THROW(read_broad_hdf5(dir.file("text.hdf5")), IoError);
+  Recording bad = small_recording();
+  bad.acc = RowsX3::Zero(4, 3);
+  try {
+    write_broad_hdf5(dir.file("bad.hdf5"), bad);
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("different lengths"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Csv, ReadsColumnsInAnyOrder) {
+  TempDir dir;
+  std::ofstream(dir.file("r.csv")) << "# a comment\n"
+                                      "t_s,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z,mag_x,mag_y,mag_z,movement\n"
+                                      "0.00,0.1,0.2,0.3,0,0,9.81,20,0,-40,1\n"
+                                      "0.02,0.1,0.2,0.3,0,0,9.81,,,,1\n"
+                                      "0.04,0.1,0.2,0.3,0,0,9.81,21,0,-40,0\n";
+  const Recording r = read_csv(dir.file("r.csv"));
+  ASSERT_EQ(r.size(), 3u);
+  EXPECT_NEAR(r.sampling_rate_hz, 50.0, 1e-9);
+  EXPECT_EQ(r.sample(1).timestamp_ns, 20'000'000u);
+  EXPECT_EQ(r.sample(0).gyr, fusion::Vec3(0.1, 0.2, 0.3));
+  EXPECT_FALSE(r.sample(1).has_mag);
+  EXPECT_EQ(r.sample(2).mag.x(), 21.0);
+  EXPECT_EQ(r.movement, (std::vector<std::uint8_t>{1, 1, 0}));
+}
+
+TEST(Csv, ErrorsNameFileLineAndProblem) {
+  TempDir dir;
+  std::ofstream(dir.file("m.csv")) << "t_s,acc_x,acc_y,acc_z\n0,0,0,9.8\n";
+  try {
+    read_csv(dir.file("m.csv"));
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("gyr_x"), std::string::npos) << e.what();
+  }
+  std::ofstream(dir.file("n.csv")) << "t_s,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,9.8,0,0,0\n0.01,0,abc,9.8,0,0,0\n";
+  try {
+    read_csv(dir.file("n.csv"));
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("n.csv:3: 'abc' is not a number"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace bsn::io
