@@ -8,6 +8,7 @@ packages=(
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools default-jre-headless  # Fast DDS 2.9 + IDL generator
   libeigen3-dev libyaml-cpp-dev libcli11-dev libhdf5-dev  # core math, configuration, command line, HDF5 recordings
   libgtest-dev libgmock-dev libbenchmark-dev         # tests and benchmarks
+  cyclonedds-dev cyclonedds-tools                    # another vendor's DDS, for the interoperability test
   clang-format procps                                # formatting check in CI; ps for diagnostics
 )
 

@@ -2,20 +2,154 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <filesystem>
 #include <functional>
+#include <limits>
 
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/log.hpp"
 #include "bsn/dds/participant.hpp"
 #include "bsn/dds/shutdown.hpp"
+#include "bsn/io/recording.hpp"
 #include "bsn/sim/mimu_synthesizer.hpp"
 #include "bsn/sim/motion_model.hpp"
+#include "bsn/sim/scenario_file.hpp"
 
 namespace bsn::sim {
+namespace {
+
+// Sleeps until `t_ns` on CLOCK_MONOTONIC; false if a shutdown was requested.
+bool sleep_until(std::uint64_t t_ns) {
+  const timespec target{static_cast<time_t>(t_ns / 1000000000ull), static_cast<long>(t_ns % 1000000000ull)};
+  // Absolute sleeps keep the schedule exact; SIGINT/SIGTERM interrupt the sleep (EINTR) and end the loop.
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &target, nullptr) == EINTR && !dds::shutdown_requested()) {
+  }
+  return !dds::shutdown_requested();
+}
+
+// Every segment of the scenario to DIR/<segment>.hdf5 (BROAD layout). Dropped samples and timestamp jitter are
+// properties of a live link: the files hold every sample at the nominal rate.
+int write_scenario_files(const ScenarioSpec& spec, const SimNodeOptions& opt) {
+  ScenarioRunner runner(spec, {}, opt.ideal);
+  const auto n = static_cast<Eigen::Index>(runner.sample_count());
+  std::vector<io::Recording> recs(runner.segment_names().size());
+  for (io::Recording& r : recs) {
+    r.sampling_rate_hz = spec.rate_hz;
+    r.gyr.resize(n, 3);
+    r.acc.resize(n, 3);
+    r.mag.resize(n, 3);
+    r.opt_quat.resize(n, 4);
+    r.movement.resize(static_cast<std::size_t>(n));
+  }
+  std::vector<ScenarioSample> out;
+  for (Eigen::Index k = 0; runner.next(out); ++k) {
+    for (std::size_t j = 0; j < out.size(); ++j) {
+      io::Recording& r = recs[j];
+      const fusion::ImuSample& s = out[j].sample;
+      r.gyr.row(k) = s.gyr.transpose();
+      r.acc.row(k) = s.acc.transpose();
+      if (s.has_mag) {
+        r.mag.row(k) = s.mag.transpose();
+      } else {
+        r.mag.row(k).setConstant(std::numeric_limits<double>::quiet_NaN());
+      }
+      const Quat q = fusion::canonical(out[j].truth);
+      r.opt_quat.row(k) << q.w(), q.x(), q.y(), q.z();
+      r.movement[static_cast<std::size_t>(k)] = out[j].movement ? 1 : 0;
+    }
+  }
+  std::filesystem::create_directories(opt.out_dir);
+  for (std::size_t j = 0; j < recs.size(); ++j) {
+    const std::string path = (std::filesystem::path(opt.out_dir) / (runner.segment_names()[j] + ".hdf5")).string();
+    io::write_broad_hdf5(path, recs[j]);
+    dds::log_info("wrote ", path, " (", n, " samples at ", spec.rate_hz, " Hz)");
+  }
+  return 0;
+}
+
+int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
+  // A one-segment scenario (a free body) needs no --segment; otherwise it defaults to the node id.
+  const Body body = build_body(spec);
+  const std::string segment = !opt.segment.empty() ? opt.segment : body.size() == 1 ? body.segment(0).name : opt.node;
+  ScenarioRunner runner(spec, {segment}, opt.ideal);
+  dds::install_shutdown_handlers();
+  dds::Participant participant({opt.domain, "bsn sim " + opt.node});
+  auto raw_writer = participant.make_writer<bsn::RawSample>(dds::kRawTopic, dds::TopicQos::kSensorData);
+  auto truth_writer = participant.make_writer<bsn::Orientation>(dds::kTruthOrientationTopic, dds::TopicQos::kEstimate);
+  dds::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
+                spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain);
+  bsn::RawSample raw;
+  raw.node_id(opt.node);
+  bsn::Orientation truth;
+  truth.segment(segment);
+  truth.node_id(opt.node);
+  std::vector<ScenarioSample> out;
+  std::uint64_t write_failures = 0, dropped = 0;
+  const std::uint64_t t0 = dds::monotonic_ns();
+  for (std::uint64_t k = 0; !dds::shutdown_requested() && runner.next(out); ++k) {
+    const ScenarioSample& s = out[0];
+    // Sensor time runs at scenario speed; the wall clock `speed` times faster.
+    const std::uint64_t sensor_ns = t0 + s.sample.timestamp_ns;
+    if (!sleep_until(t0 + static_cast<std::uint64_t>(static_cast<double>(s.sample.timestamp_ns) / opt.speed))) break;
+    if (s.dropped) {
+      ++dropped;  // lost on the link: the sequence number still advances
+      continue;
+    }
+    fusion::ImuSample sample = s.sample;
+    sample.timestamp_ns = sensor_ns;
+    dds::fill_raw_sample(sample, raw);
+    raw.seq(k);
+    if (!raw_writer->write(raw)) ++write_failures;
+    truth.timestamp_ns(sensor_ns);
+    dds::fill_orientation(s.truth, truth);
+    truth_writer->write(truth);
+  }
+  if (write_failures > 0) dds::log_warn(write_failures, " raw samples could not be written");
+  dds::log_info("node '", opt.node, "' stopped (", dropped, " samples dropped by the sensor model)");
+  return 0;
+}
+
+int run_scenario(const SimNodeOptions& opt) {
+  if (opt.rate_given) {
+    dds::log_error("--rate does not apply with --scenario: the scenario's rate_hz sets the rate");
+    return 2;
+  }
+  if (!(opt.speed > 0.0 && opt.speed <= 1e6)) {
+    dds::log_error("--speed must be in (0, 1e6]");
+    return 2;
+  }
+  if (opt.out_dir.empty() && (opt.node.empty() || opt.node.size() > 63)) {
+    dds::log_error("--scenario needs --node ID (1 to 63 characters) to publish, or --out DIR to write files");
+    return 2;
+  }
+  try {
+    ScenarioSpec spec = load_scenario(opt.scenario);
+    if (opt.seed != 0) spec.seed = opt.seed;
+    if (opt.duration_s > 0.0) spec.duration_s = std::min(spec.duration_s, opt.duration_s);
+    return opt.out_dir.empty() ? publish_scenario(spec, opt) : write_scenario_files(spec, opt);
+  } catch (const ScenarioError& e) {
+    dds::log_error(e.what());
+  } catch (const std::invalid_argument& e) {
+    dds::log_error(opt.scenario, ": ", e.what());
+  } catch (const io::IoError& e) {
+    dds::log_error(e.what());
+  } catch (const std::filesystem::filesystem_error& e) {
+    dds::log_error(e.what());
+  }
+  return 2;
+}
+
+}  // namespace
 
 int run_sim_node(const SimNodeOptions& opt) {
+  if (!opt.scenario.empty()) return run_scenario(opt);
+  if (!opt.out_dir.empty() || opt.speed != 1.0) {
+    dds::log_error("--out and --speed need --scenario");
+    return 2;
+  }
   if (opt.node.empty() || opt.node.size() > 63) {
     dds::log_error("--node must be 1 to 63 characters");
     return 2;

@@ -1,5 +1,6 @@
 // `bsn sim`: one simulated sensor node. Publishes raw samples on bsn/raw and its exact orientation on
-// bsn/truth/orientation, at a fixed rate on the host's monotonic clock.
+// bsn/truth/orientation, at a fixed rate on the host's monotonic clock. With a scenario file it publishes one
+// segment of the scenario (real time or `speed` times faster), or writes every segment to BROAD-layout HDF5.
 #pragma once
 
 #include <cstdint>
@@ -13,8 +14,12 @@ struct SimNodeOptions {
   double rate_hz = 100.0;   ///< sample rate, Hz
   std::uint64_t seed = 0;   ///< motion and noise seed; 0 = derived from the node id
   double duration_s = 0.0;  ///< stop after this long, s (0 = until SIGINT/SIGTERM)
-  bool ideal = false;       ///< no sensor noise
+  bool ideal = false;       ///< no sensor noise (with a scenario: every sensor error off)
   int domain = 0;
+  std::string scenario;     ///< scenario YAML file ("" = the simple per-node motion above)
+  double speed = 1.0;       ///< scenario mode: publish this many times faster than real time
+  std::string out_dir;      ///< scenario mode: write DIR/<segment>.hdf5 instead of publishing
+  bool rate_given = false;  ///< --rate was on the command line (not allowed with a scenario)
 };
 
 /// Runs until the duration ends or a signal arrives. Returns the process exit code.

@@ -53,7 +53,7 @@ SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
   if (!seen_any_ || seq > max_seq_seen_) max_seq_seen_ = seq;
   seen_any_ = true;
   SampleVerdict verdict = SampleVerdict::kAccepted;
-  if (!s.finite()) {
+  if (!s.values_finite()) {
     verdict = SampleVerdict::kNonFinite;
   } else if ((s.has_acc && !within(s.acc, params_.max_abs_acc_m_s2)) ||
              (s.has_gyr && !within(s.gyr, params_.max_abs_gyr_rad_s)) ||

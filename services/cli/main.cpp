@@ -4,8 +4,10 @@
 
 #include "bsn/dds/log.hpp"
 #include "bsn/dds/participant.hpp"
+#include "calibrate_command.hpp"
 #include "demo_command.hpp"
 #include "echo_command.hpp"
+#include "eval_command.hpp"
 #include "fusion_command.hpp"
 #include "sim_node.hpp"
 
@@ -25,12 +27,18 @@ int main(int argc, char** argv) {
 
   bsn::sim::SimNodeOptions sim;
   auto* sim_cmd = app.add_subcommand("sim", "Simulated sensor node: publishes bsn/raw and bsn/truth/orientation");
-  sim_cmd->add_option("--node", sim.node, "node id on bsn/raw")->required();
+  sim_cmd->add_option("--node", sim.node, "node id on bsn/raw (required unless --scenario with --out)");
   sim_cmd->add_option("--segment", sim.segment, "segment name on bsn/truth/orientation (default: node id)");
   sim_cmd->add_option("--rate", sim.rate_hz, "sample rate in Hz")->capture_default_str();
   sim_cmd->add_option("--seed", sim.seed, "motion and noise seed (default: from the node id)");
   sim_cmd->add_option("--duration", sim.duration_s, "stop after S seconds (default: run until Ctrl-C)");
-  sim_cmd->add_flag("--ideal", sim.ideal, "no sensor noise");
+  sim_cmd->add_flag("--ideal", sim.ideal, "no sensor noise (with --scenario: every sensor error off)");
+  sim_cmd
+      ->add_option("--scenario", sim.scenario, "scenario YAML file: publish its segment --segment (default: node id)")
+      ->check(CLI::ExistingFile);
+  sim_cmd->add_option("--speed", sim.speed, "with --scenario: publish N times faster than real time")
+      ->capture_default_str();
+  sim_cmd->add_option("--out", sim.out_dir, "with --scenario: write DIR/<segment>.hdf5 (BROAD layout) and exit");
   add_domain_option(sim_cmd, sim.domain);
 
   bsn::services::FusionCommandOptions fusion;
@@ -67,11 +75,42 @@ int main(int argc, char** argv) {
   demo_cmd->add_option("--rate", demo.rate_hz, "sample rate of the simulated nodes, Hz")->capture_default_str();
   add_domain_option(demo_cmd, demo.domain);
 
+  bsn::services::EvalOptions eval;
+  auto* eval_cmd = app.add_subcommand("eval", "Score filters against the reference of recordings (BROAD HDF5, CSV)");
+  eval_cmd->add_option("inputs", eval.inputs, "recordings (.hdf5 in BROAD layout, .csv) or folders of them")
+      ->required();
+  eval_cmd->add_option("--filter", eval.filters, "NAME or NAME:key=value,...; repeatable; 'all' = every filter")
+      ->take_all();
+  eval_cmd->add_flag("--json", eval.json, "print one JSON object instead of the table");
+  eval_cmd->add_option("--plot", eval.plot_path, "write an SVG image of the total error over time per filter");
+
+  bsn::services::CalibrateOptions calibrate;
+  auto* calibrate_cmd = app.add_subcommand(
+      "calibrate", "Calibrate a hand-turned recording (magnetometer, accelerometer) or identify noise (--allan)");
+  calibrate_cmd->add_option("--input", calibrate.input, "recording (CSV, BROAD HDF5) of still poses turned by hand");
+  calibrate_cmd->add_option("--allan", calibrate.allan, "static recording: print Allan noise figures instead");
+  calibrate_cmd->add_option("--field-magnitude", calibrate.field_magnitude, "|calibrated magnetometer|, M")
+      ->capture_default_str();
+  calibrate_cmd->add_flag("--json", calibrate.json, "print the magnetometer calibration as one JSON object");
+  calibrate_cmd->add_option("--output", calibrate.output, "calibration file to write (default: INPUT.calib.yaml)");
+  calibrate_cmd->add_option("--node", calibrate.node, "node id to record in the calibration file");
+  calibrate_cmd->add_flag("--accelerometer", calibrate.accelerometer, "also calibrate the accelerometer (|g|)");
+  calibrate_cmd->add_flag("--gyro-bias", calibrate.gyro_bias, "also write the gyro bias measured at rest");
+  calibrate_cmd->add_option("--rest-threshold", calibrate.rest_rate_rad_s, "rest when |gyro - bias| < this, rad/s")
+      ->capture_default_str();
+  calibrate_cmd->add_option("--min-pose", calibrate.min_pose_s, "shortest rest counted as a pose, s")
+      ->capture_default_str();
+  calibrate_cmd->add_option("--plot", calibrate.plot, "with --allan: write the Allan curves as SVG");
+
   CLI11_PARSE(app, argc, argv);
+  if (*sim_cmd) {
+    if (sim.scenario.empty() && sim.node.empty()) return app.exit(CLI::RequiredError("--node"));
+    sim.rate_given = sim_cmd->count("--rate") > 0;
+  }
 
   try {
     if (*sim_cmd) {
-      bsn::dds::set_log_identity("sim " + sim.node);
+      bsn::dds::set_log_identity("sim " + (sim.node.empty() ? std::string("scenario") : sim.node));
       return bsn::sim::run_sim_node(sim);
     }
     if (*fusion_cmd) {
@@ -82,10 +121,12 @@ int main(int argc, char** argv) {
       bsn::dds::set_log_identity("echo");
       return bsn::services::run_echo(echo);
     }
+    if (*eval_cmd) return bsn::services::run_eval(eval);
     if (*demo_cmd) {
       bsn::dds::set_log_identity("demo");
       return bsn::services::run_demo(demo);
     }
+    if (*calibrate_cmd) return bsn::services::run_calibrate(calibrate);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bsn: error: %s\n", e.what());
     return 1;

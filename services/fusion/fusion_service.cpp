@@ -39,6 +39,8 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
     seg.spec = spec;
     seg.filter = fusion::make_filter(spec.filter);
     seg.gate = fusion::SampleGate(options_.gate);
+    if (const auto c = options_.calibrations.find(spec.node); c != options_.calibrations.end())
+      seg.calibration = c->second;
     by_node_[spec.node] = i;
   }
   for (std::size_t i = 0; i < segments_.size(); ++i) {
@@ -57,6 +59,17 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
       dds::kRawTopic, dds::TopicQos::kSensorData,
       [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
 }
+
+namespace {
+
+// u = H (raw - B) on every calibrated channel that the sample carries.
+void apply_calibration(const calib::SensorCalibration& c, fusion::ImuSample& s) {
+  if (c.accelerometer && s.has_acc) s.acc = calib::apply(*c.accelerometer, s.acc);
+  if (c.gyroscope && s.has_gyr) s.gyr = calib::apply(*c.gyroscope, s.gyr);
+  if (c.magnetometer && s.has_mag) s.mag = calib::apply(*c.magnetometer, s.mag);
+}
+
+}  // namespace
 
 void FusionService::on_raw(const bsn::RawSample& raw) {
   std::lock_guard lock(mutex_);
@@ -80,7 +93,8 @@ void FusionService::on_raw(const bsn::RawSample& raw) {
     publish_status(now);
   }
 
-  const fusion::ImuSample sample = dds::to_imu_sample(raw);
+  fusion::ImuSample sample = dds::to_imu_sample(raw);
+  apply_calibration(seg.calibration, sample);
   const fusion::SampleVerdict verdict = seg.gate.check(raw.seq(), sample);
   if (verdict == fusion::SampleVerdict::kAcceptedClockReset) {
     dds::log_warn("node '", seg.spec.node, "': its clock moved to a new time base; restarting its filter");

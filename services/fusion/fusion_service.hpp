@@ -9,6 +9,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "bsn/calib/sensor_calibration.hpp"
 #include "bsn/dds/participant.hpp"
 #include "bsn/fusion/body_model.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
@@ -27,6 +28,8 @@ class FusionService {
     bool best_effort = false;
     fusion::SampleGate::Params gate;
     std::string process_id;  ///< key on bsn/status; default "fusion@<host>:<pid>"
+    /// Per node id: sensor calibrations applied to every raw sample (u = H (raw - B)) before the gate and filter.
+    std::unordered_map<std::string, calib::SensorCalibration> calibrations;
   };
 
   FusionService(dds::Participant& participant, fusion::BodyModel body, Options options);
@@ -42,6 +45,7 @@ class FusionService {
     fusion::SegmentSpec spec;
     std::unique_ptr<fusion::OrientationFilter> filter;
     fusion::SampleGate gate;
+    calib::SensorCalibration calibration;  ///< empty = raw samples used as they come
     std::uint64_t filter_rejected = 0;
     bool has_orientation = false;
     fusion::Quat q = fusion::Quat::Identity();

@@ -27,10 +27,10 @@ inline std::vector<std::filesystem::path> broad_files() {
 }  // namespace bsn::testing
 
 // Skips the test (reported as skipped by ctest) with a message saying where the data was looked for.
-#define BSN_REQUIRE_BROAD()                                                                           \
-  do {                                                                                                \
-    if (bsn::testing::broad_files().empty()) {                                                        \
-      GTEST_SKIP() << "BROAD recordings not found in " << bsn::testing::broad_dir()                   \
-                   << " (set BSN_BROAD_DIR to the folder of the .hdf5 files)";                         \
-    }                                                                                                 \
+#define BSN_REQUIRE_BROAD()                                                         \
+  do {                                                                              \
+    if (bsn::testing::broad_files().empty()) {                                      \
+      GTEST_SKIP() << "BROAD recordings not found in " << bsn::testing::broad_dir() \
+                   << " (set BSN_BROAD_DIR to the folder of the .hdf5 files)";      \
+    }                                                                               \
   } while (0)

@@ -10,6 +10,8 @@
 #include <string_view>
 #include <vector>
 
+#include "bsn/dds/calibration_file.hpp"
+
 namespace bsn::dds {
 namespace {
 
@@ -84,6 +86,17 @@ class Parser {
     return spec;
   }
 
+  // `calibration: FILE` (relative to the body file): loaded here only to report a bad file at its line; the
+  // fusion service reads it again with load_body_calibrations().
+  void check_calibration(const YAML::Node& n) const {
+    const std::string path = resolve_relative(scalar(n, "calibration"), source_);
+    try {
+      (void)load_calibration_file(path);
+    } catch (const ConfigError& e) {
+      fail(n, std::string("calibration: ") + e.what());
+    }
+  }
+
   BodyModel body(const YAML::Node& root) {
     if (!root || root.IsNull()) fail_at(1, "the body model file is empty");
     require_map(root, "the body model");
@@ -106,7 +119,7 @@ class Parser {
     std::vector<int> lines;
     for (const YAML::Node& s : segs) {
       require_map(s, "a segment");
-      check_keys(s, {"name", "node", "parent", "joint", "joint_axes", "filter"}, "segment");
+      check_keys(s, {"name", "node", "parent", "joint", "joint_axes", "filter", "calibration"}, "segment");
       SegmentSpec spec;
       if (!s["name"]) fail(s, "segment without 'name'");
       spec.name = scalar(s["name"], "name");
@@ -115,6 +128,7 @@ class Parser {
       if (s["joint"]) spec.joint = scalar(s["joint"], "joint");
       spec.joint_axes = s["joint_axes"] ? axes(s["joint_axes"]) : default_axes;
       spec.filter = s["filter"] ? filter(s["filter"], default_filter) : default_filter;
+      if (s["calibration"]) check_calibration(s["calibration"]);
       model.segments.push_back(std::move(spec));
       lines.push_back(s.Mark().line + 1);
     }

@@ -1,11 +1,11 @@
+#include "bsn/io/recording.hpp"
+
 #include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <fstream>
 #include <map>
 #include <sstream>
-
-#include "bsn/io/recording.hpp"
 
 namespace bsn::io {
 
@@ -120,7 +120,8 @@ Recording read_csv(const std::string& path) {
     rows.push_back(r);
     const double t = number(c_t, false);
     if (!(t >= 0.0)) throw IoError(path + ":" + std::to_string(line_no) + ": time must be >= 0");
-    rec.timestamp_ns.push_back(time_in_ns ? static_cast<std::uint64_t>(t) : static_cast<std::uint64_t>(std::llround(t * 1e9)));
+    rec.timestamp_ns.push_back(time_in_ns ? static_cast<std::uint64_t>(t)
+                                          : static_cast<std::uint64_t>(std::llround(t * 1e9)));
     if (has_movement) rec.movement.push_back(number(col.at("movement"), false) != 0.0 ? 1 : 0);
   }
   const auto n = static_cast<Eigen::Index>(rows.size());

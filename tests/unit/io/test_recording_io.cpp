@@ -104,7 +104,8 @@ TEST(Csv, ErrorsNameFileLineAndProblem) {
   } catch (const IoError& e) {
     EXPECT_NE(std::string(e.what()).find("gyr_x"), std::string::npos) << e.what();
   }
-  std::ofstream(dir.file("n.csv")) << "t_s,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,9.8,0,0,0\n0.01,0,abc,9.8,0,0,0\n";
+  std::ofstream(dir.file("n.csv"))
+      << "t_s,acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,9.8,0,0,0\n0.01,0,abc,9.8,0,0,0\n";
   try {
     read_csv(dir.file("n.csv"));
     FAIL();

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <optional>
 
 namespace bsn::calib {
 
@@ -18,7 +19,16 @@ struct ChannelCalibration {
 /// u = H (raw - B).
 inline Vec3 apply(const ChannelCalibration& c, const Vec3& raw) { return c.transform * (raw - c.bias); }
 
-/// Gyro bias as the mean rate over a resting recording (rad/s). `rates` holds one sample per column.
+/// The calibrations of one sensor node; a channel without one is used as it comes.
+struct SensorCalibration {
+  std::optional<ChannelCalibration> accelerometer;  ///< m/s^2 after applying
+  std::optional<ChannelCalibration> gyroscope;      ///< rad/s after applying
+  std::optional<ChannelCalibration> magnetometer;   ///< the unit of the fit's field magnitude after applying
+  bool empty() const { return !accelerometer && !gyroscope && !magnetometer; }
+};
+
+/// Gyro bias as the mean rate over a resting recording (rad/s). `rates` holds one sample per column; non-finite
+/// columns are skipped; no finite sample gives zero.
 Vec3 gyro_bias_from_rest(const Eigen::Ref<const Eigen::Matrix3Xd>& rates);
 
 }  // namespace bsn::calib

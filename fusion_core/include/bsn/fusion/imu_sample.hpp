@@ -1,5 +1,6 @@
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 
 #include "bsn/fusion/rotation.hpp"
@@ -16,9 +17,16 @@ struct ImuSample {
   bool has_gyr = true;
   bool has_mag = true;  ///< false for a sample without magnetometer reading (6D update)
 
-  /// True when every present channel is finite.
-  bool finite() const {
+  /// True when every value of every present channel is finite (no NaN, no Inf).
+  bool values_finite() const {
     return (!has_acc || acc.allFinite()) && (!has_gyr || gyr.allFinite()) && (!has_mag || mag.allFinite());
+  }
+
+  /// True when the values and the squared norms of every present channel are finite: the sample can be used in
+  /// arithmetic without overflowing (1e300 is a finite value whose square is not). Filters reject anything else.
+  bool finite() const {
+    return values_finite() && (!has_acc || std::isfinite(acc.squaredNorm())) &&
+           (!has_gyr || std::isfinite(gyr.squaredNorm())) && (!has_mag || std::isfinite(mag.squaredNorm()));
   }
 };
 

@@ -28,7 +28,7 @@ struct Recording {
   RowsX3 mag;                     ///< uT, sensor frame, N x 3; a row of NaN = no magnetometer sample
   RowsX4 opt_quat;                ///< reference (w, x, y, z) sensor-to-earth ENU, N x 4 or empty; NaN = no reference
   RowsX3 opt_pos;                 ///< marker position, m, N x 3 or empty
-  std::vector<std::uint8_t> movement;   ///< 1 where errors count, N or empty (= all)
+  std::vector<std::uint8_t> movement;       ///< 1 where errors count, N or empty (= all)
   std::vector<std::uint64_t> timestamp_ns;  ///< per-sample time, N or empty (= uniform at sampling_rate_hz)
 
   std::size_t size() const { return static_cast<std::size_t>(gyr.rows()); }

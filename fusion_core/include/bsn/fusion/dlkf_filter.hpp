@@ -1,0 +1,165 @@
+// The dual linear Kalman filter with TRIAD (DLKF) of Fan et al. 2018 §2.4.1 and Fig. 4 (after Ligorio & Sabatini):
+//  - one linear Kalman filter separates gravity from external acceleration: state [g_S, a_S] in the sensor frame,
+//    g_S turned by the (bias-corrected) gyro, a_S a first-order Gauss-Markov process, measurement acc = g_S + a_S;
+//  - a second, identical in form, separates the geomagnetic field from the magnetic disturbance: [h_S, d_S],
+//    measurement mag = h_S + d_S;
+//  - TRIAD (Fan eqs. 1-4) turns the two estimated vectors into the orientation, gravity first, so roll and pitch
+//    never depend on the magnetometer.
+// Both filters are linear in their state: the gyro enters as a known input in the transition matrix, and the gyro
+// noise enters Q through the current estimate (Q = sigma_g^2 dt [v x][v x]^T). The gyro bias is removed with Fan's
+// low-pass method (§2.3.3), as Fan do for every filter but the EKF.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string_view>
+
+#include "bsn/fusion/gyro_bias_lowpass.hpp"
+#include "bsn/fusion/orientation_filter.hpp"
+#include "bsn/fusion/r_adaption.hpp"
+
+namespace bsn::fusion {
+
+namespace dlkf {
+
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+
+/// One of the two linear Kalman filters: a vector v fixed in the earth frame, seen in the sensor frame, plus a
+/// disturbance d (first-order Gauss-Markov, stationary standard deviation sigma_d, correlation time tau_d);
+/// measurement y = v + d + noise.
+struct SplitKalman {
+  Vec6 x = Vec6::Zero();  ///< [v, d], sensor frame
+  Mat6 p = Mat6::Identity();
+
+  /// x from the first measurement y (v = y, d = 0) with the exact covariance of that choice:
+  /// e_v = d + n, e_d = -d.
+  void initialise(const Vec3& y, double var_noise, double var_disturbance);
+  /// Turns v by the rotation `turn` (sensor frame, earth-fixed vector: v <- turn v), decays d by c = exp(-dt/tau_d).
+  void predict(const Eigen::Matrix3d& turn, double gyro_var_dt, double c, double var_disturbance);
+  /// Measurement y = v + d with noise variance var_noise per axis (Joseph form).
+  void correct(const Vec3& y, double var_noise);
+  Vec3 vector() const { return x.head<3>(); }
+  Vec3 disturbance() const { return x.tail<3>(); }
+};
+
+}  // namespace dlkf
+
+class DlkfFilter final : public OrientationFilter {
+ public:
+  struct Params {
+    /// Gyro noise density (global error, including scale and misalignment), rad/s per sqrt(Hz): the direction
+    /// of each estimated vector diffuses with variance sigma_g^2 dt per step. Default 0.002, chosen with
+    /// sigma_ext_acc on the eight BROAD trials (mean total RMSE 4.5 deg; 0.01 with sigma_ext_acc 0.5 gave 12 deg):
+    /// a good gyro is trusted for tens of seconds, the accelerometer mainly removes slow drift.
+    double sigma_g = 0.002;
+    /// Accelerometer white noise, m/s^2 per sample. Default 0.05 (MEMS accelerometer at 100 Hz).
+    double sigma_a = 0.05;
+    /// External acceleration: stationary standard deviation, m/s^2 (default 3, see sigma_g), and correlation
+    /// time, s (default 0.1 s: body-segment accelerations change within a tenth of a second; 0.5 s was far worse
+    /// on BROAD).
+    double sigma_ext_acc = 3.0;
+    double tau_ext_acc_s = 0.1;
+    /// Accelerometer R-adaption: the accelerometer update is skipped (infinite variance) while | |acc| - g |
+    /// exceeds this, m/s^2; 0 = never. Default 2 m/s^2: larger external accelerations are not Gauss-Markov noise
+    /// of sigma_ext_acc but sustained motion, and would otherwise be absorbed into the gravity estimate.
+    double acc_rejection_m_s2 = 2.0;
+    /// Magnetometer white noise, uT per sample. Default 0.5.
+    double sigma_m = 0.5;
+    /// Magnetic disturbance: stationary standard deviation, uT (default 3), and correlation time, s (default 1 s).
+    double sigma_mag_disturbance = 3.0;
+    double tau_mag_disturbance_s = 1.0;
+    /// Low-pass gyro bias (Fan §2.3.3, eqs. 11-12): 1 = on (default), 0 = off; corner frequency (Hz, default
+    /// 0.05), still threshold on every gyro component (rad/s, default 3 deg/s) and minimum still time (s, default 2).
+    double gyro_bias_lowpass = 1.0;
+    double bias_corner_frequency_hz = 0.05;
+    double bias_omega_min_rad_s = 0.05235987755982988;
+    double bias_min_static_s = 2.0;
+    /// Magnetometer R-adaption (Fan eq. 10): 1 = skip the magnetometer update while magnitude or dip deviate from
+    /// the values at initialisation; 0 = always use it (Fan's test B). Default 1. Thresholds as
+    /// MagneticRAdaption::Params (0.1 / 0.05, 10 / 5 deg, 0.2 s).
+    double mag_rejection = 1.0;
+    double mag_magnitude_enter = 0.1;
+    double mag_magnitude_exit = 0.05;
+    double mag_dip_enter_rad = 0.1745;
+    double mag_dip_exit_rad = 0.0873;
+    double mag_min_clean_s = 0.2;
+    /// A timestamp gap longer than this re-initialises from the sample, s. Default 1 s.
+    double max_gap_s = 1.0;
+    /// Rest detection: |gyr| < rest_gyr_rad_s (0.05 rad/s) and | |acc| - g | < rest_acc_m_s2 (0.5 m/s^2) for
+    /// rest_min_s (1.5 s).
+    double rest_gyr_rad_s = 0.05;
+    double rest_acc_m_s2 = 0.5;
+    double rest_min_s = 1.5;
+    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
+    double init_period_s = 3.0;
+  };
+
+  struct Coefficients {
+    double var_g = 0.0;     ///< sigma_g^2
+    double var_a = 0.0;     ///< sigma_a^2
+    double var_ext = 0.0;   ///< sigma_ext_acc^2
+    double var_m = 0.0;     ///< sigma_m^2
+    double var_dist = 0.0;  ///< sigma_mag_disturbance^2
+    double inv_tau_ext = 0.0;
+    double inv_tau_dist = 0.0;
+    std::uint64_t max_gap_ns = 0;
+    std::uint64_t rest_min_ns = 0;
+    std::uint64_t init_period_ns = 0;
+  };
+
+  struct State {
+    dlkf::SplitKalman gravity;   ///< [g_S (m/s^2), external acceleration a_S (m/s^2)]
+    dlkf::SplitKalman magnetic;  ///< [h_S (uT), disturbance d_S (uT)]
+    bool have_mag = false;       ///< the magnetic filter holds a measured field (else a gyro-carried heading)
+    double mag_ref_norm = 0.0;   ///< |h| at the first magnetometer sample, uT (R-adaption reference)
+    double mag_ref_dip = 0.0;    ///< dip at the first magnetometer sample, rad
+    Quat q = Quat::Identity();   ///< TRIAD result, sensor-to-earth
+    Vec3 gyr_prev = Vec3::Zero();
+    bool have_gyr_prev = false;
+    bool initialised = false;
+    std::uint64_t last_ns = 0;
+    std::uint64_t init_ns = 0;
+    bool still = false;
+    std::uint64_t still_since_ns = 0;
+    FilterFlags flags;
+    double decay_dt = -1.0;   ///< the step the two decay factors below were computed for, s (cache)
+    double decay_ext = 0.0;   ///< exp(-dt / tau_ext_acc)
+    double decay_dist = 0.0;  ///< exp(-dt / tau_mag_disturbance)
+  };
+
+  explicit DlkfFilter(const Params& params);
+  DlkfFilter() : DlkfFilter(Params{}) {}
+
+  UpdateResult update(const ImuSample& sample) override;
+  Quat orientation() const override { return state_.q; }
+  FilterFlags flags() const override { return state_.flags; }
+  Vec3 gyro_bias() const override { return bias_.bias(); }
+  bool initialised() const override { return state_.initialised; }
+  void reset() override;
+  std::string_view name() const override { return "dlkf"; }
+
+  /// Covariances of the two linear filters: [g_S, a_S] and [h_S, d_S].
+  const dlkf::Mat6& gravity_covariance() const { return state_.gravity.p; }
+  const dlkf::Mat6& magnetic_covariance() const { return state_.magnetic.p; }
+  const Params& params() const { return params_; }
+  const State& state() const { return state_; }
+
+  /// TRIAD (Fan eqs. 1-3) with gravity dominant: the sensor-to-earth orientation whose earth z is along `up`
+  /// (sensor frame) and whose earth y is along the horizontal part of `field`. Requires them not parallel.
+  static Quat triad(const Vec3& up, const Vec3& field);
+
+ private:
+  UpdateResult initialise(const ImuSample& s);
+  void initialise_magnetic(const Vec3& mag);
+
+  Params params_;
+  Coefficients coeff_;
+  GyroBiasLowPass bias_;
+  MagneticRAdaption r_adaption_;
+  State state_;
+};
+
+std::unique_ptr<OrientationFilter> make_dlkf_filter(const FilterSpec& spec);
+
+}  // namespace bsn::fusion

@@ -1,0 +1,58 @@
+// Low-pass gyro bias estimate (Fan et al. 2018, section 2.3.3, eqs. 11-12): while every component of the
+// measured rate has stayed below omega_min for longer than t_b, the bias follows the measured rate through a
+// first-order low-pass with corner frequency f_c; during motion it is frozen.
+//
+// Eq. 11 as printed, w_bias = 2 pi f_c * integral(p * w dt), lacks the feedback term: integrated literally it
+// would grow without bound at rest. The text calls it a low-pass filter with corner frequency f_c, so we
+// implement exactly that: d(w_bias)/dt = 2 pi f_c * p * (w - w_bias), discretised exactly for any dt.
+#pragma once
+
+#include <cstdint>
+
+#include "bsn/fusion/rotation.hpp"
+
+namespace bsn::fusion {
+
+class GyroBiasLowPass {
+ public:
+  struct Params {
+    /// Corner frequency f_c of the low-pass, Hz. Default 0.05 Hz (Fan et al.): time constant 3.2 s.
+    double corner_frequency_hz = 0.05;
+    /// omega_min: the sensor counts as still while every gyro component is below this, rad/s. Default
+    /// 3 deg/s (Fan et al.).
+    double omega_min_rad_s = 3.0 * 0.017453292519943295;
+    /// t_b: minimum still time before the bias is updated, s. Default 2 s (Fan et al.).
+    double min_static_s = 2.0;
+  };
+
+  struct State {
+    Vec3 bias = Vec3::Zero();          ///< estimate, sensor frame, rad/s (measured = true + bias)
+    bool still = false;                ///< every component below omega_min at the last sample
+    std::uint64_t still_since_ns = 0;  ///< start of the current still period
+    bool updating = false;             ///< p of eq. 12 at the last sample
+  };
+
+  /// Throws std::invalid_argument on a non-positive or non-finite parameter.
+  explicit GyroBiasLowPass(const Params& params);
+  GyroBiasLowPass() : GyroBiasLowPass(Params{}) {}
+
+  /// Feeds the raw measured rate of a sample at t_ns, dt seconds after the previous one (dt <= 0 or
+  /// non-finite input changes nothing but the still timer).
+  void update(std::uint64_t t_ns, double dt, const Vec3& gyr);
+  const Vec3& bias() const { return state_.bias; }
+  /// Overwrites the estimate (a filter that also estimates the bias by other means keeps this one in step).
+  void set_bias(const Vec3& bias) { state_.bias = bias; }
+  bool updating() const { return state_.updating; }
+  void reset() { state_ = State{}; }
+  const State& state() const { return state_; }
+
+ private:
+  Params params_;
+  double omega_c_ = 0.0;  ///< 2 pi f_c, rad/s
+  std::uint64_t min_static_ns_ = 0;
+  double cached_dt_ = -1.0;   ///< dt of the last low-pass step
+  double cached_gain_ = 0.0;  ///< 1 - exp(-omega_c dt) for cached_dt_
+  State state_;
+};
+
+}  // namespace bsn::fusion

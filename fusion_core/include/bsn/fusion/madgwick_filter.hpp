@@ -1,0 +1,109 @@
+// Madgwick's gradient descent algorithm (GDA; Madgwick et al. 2011, Fan et al. 2018 section 2.4.3), from the
+// paper's equations: strapdown rate of change plus one normalised gradient-descent step of size beta on the
+// objective f = [R(q)^T g_E - a ; R(q)^T b_E - m] (unit vectors), where the earth reference of the field b_E
+// has the same norm and vertical component as the measured field rotated into the earth frame.
+//
+// Not ported from the widely copied C code: that code keeps |b_E| at half the measured norm (it stores b
+// where its variable names and formulas expect 2b), so its objective never vanishes at the true orientation.
+// Here f and its gradient are exactly zero at the truth (tested).
+//
+// ENU: gravity reference earth z (specific force, up), field reference in the y-z plane (y = magnetic north);
+// the paper's x-north frame differs only in which horizontal axis carries the field.
+//
+// Two factory names: "madgwick" (9D: uses the magnetometer whenever a sample has one) and "madgwick6" (6D:
+// never uses it). The gyro bias is removed by the low-pass estimate of Fan et al. (GyroBiasLowPass), as in
+// Fan's comparison, instead of Madgwick's integral bias term.
+#pragma once
+
+#include <cstdint>
+#include <string_view>
+
+#include "bsn/fusion/gyro_bias_lowpass.hpp"
+#include "bsn/fusion/orientation_filter.hpp"
+#include "bsn/fusion/rest_detector.hpp"
+
+namespace bsn::fusion {
+
+class MadgwickFilter final : public OrientationFilter {
+ public:
+  struct Params {
+    /// beta: magnitude of the gradient-descent step, rad/s (the quaternion rate of the correction; the
+    /// orientation turns at up to 2 beta rad/s towards the measurements). Default 0.02: the BROAD optimum
+    /// (flat from 0.015 to 0.02; Fan's 0.1 gives 4.5 deg instead of 3.2 deg mean total RMSE).
+    double beta = 0.02;
+    /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
+    double gyro_bias_lowpass = 1.0;
+    /// Low-pass gyro bias (see GyroBiasLowPass): f_c in Hz, omega_min in rad/s, t_b in s. Defaults 0.05 Hz,
+    /// 3 deg/s, 2 s (Fan et al.).
+    double bias_corner_frequency_hz = 0.05;
+    double bias_omega_min_rad_s = 3.0 * 0.017453292519943295;
+    double bias_min_static_s = 2.0;
+    /// A timestamp gap longer than this re-initialises from acc + mag, s. Default 1 s. Between readings of a
+    /// magnetometer slower than the IMU, the 9D step uses the last reading turned by the gyro since then, for
+    /// at most this long, so the heading gain does not drop with the magnetometer rate.
+    double max_gap_s = 1.0;
+    /// Rest detection (see RestDetector): rad/s, m/s^2, s. Defaults 0.05, 0.5, 1.5.
+    double rest_gyr_rad_s = 0.05;
+    double rest_acc_m_s2 = 0.5;
+    double rest_min_s = 1.5;
+    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
+    double init_period_s = 3.0;
+  };
+
+  struct Coefficients {
+    std::uint64_t max_gap_ns = 0;
+    std::uint64_t init_period_ns = 0;
+  };
+
+  struct State {
+    Quat q = Quat::Identity();  ///< sensor-to-earth
+    bool initialised = false;
+    Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, unit, turned into the current sensor frame
+    std::uint64_t held_mag_ns = 0;  ///< its timestamp; 0 = none
+    std::uint64_t last_ns = 0;
+    std::uint64_t init_ns = 0;
+    FilterFlags flags;
+  };
+
+  using Jacobian = Eigen::Matrix<double, 3, 4>;  ///< d f / d (w, x, y, z)
+
+  /// Throws std::invalid_argument on an out-of-range parameter.
+  MadgwickFilter(const Params& params, bool use_magnetometer);
+  MadgwickFilter() : MadgwickFilter(Params{}, true) {}
+
+  /// Objective of one reference: R(q)^T d - s, i.e. q* (x) d (x) q - s (d earth frame, s sensor frame).
+  static Vec3 objective(const Quat& q, const Vec3& d, const Vec3& s);
+  /// Jacobian of objective() with respect to (w, x, y, z), in the paper's unit-quaternion form.
+  static Jacobian jacobian(const Quat& q, const Vec3& d);
+  /// Earth-frame field reference for a unit measured field m: h = q (x) m (x) q*, b = (0, |h_xy|, h_z).
+  static Vec3 magnetic_reference(const Quat& q, const Vec3& m_unit);
+  /// Gradient J^T f of the (6D or 9D) objective, as (w, x, y, z); mag_unit ignored when use_mag is false.
+  static Eigen::Vector4d gradient(const Quat& q, const Vec3& acc_unit, const Vec3& mag_unit, bool use_mag);
+
+  UpdateResult update(const ImuSample& sample) override;
+  Quat orientation() const override { return state_.q; }
+  FilterFlags flags() const override { return state_.flags; }
+  Vec3 gyro_bias() const override { return bias_.bias(); }
+  bool initialised() const override { return state_.initialised; }
+  void reset() override;
+  std::string_view name() const override { return use_magnetometer_ ? "madgwick" : "madgwick6"; }
+
+  const Params& params() const { return params_; }
+  const State& state() const { return state_; }
+
+ private:
+  UpdateResult initialise(const ImuSample& s);
+
+  Params params_;
+  bool use_magnetometer_;
+  Coefficients coeff_;
+  State state_;
+  RestDetector rest_;
+  GyroBiasLowPass bias_;
+};
+
+/// Factory entries: "madgwick" (9D) and "madgwick6" (6D), with the Params fields as parameter names.
+std::unique_ptr<OrientationFilter> make_madgwick_filter(const FilterSpec& spec);
+std::unique_ptr<OrientationFilter> make_madgwick6_filter(const FilterSpec& spec);
+
+}  // namespace bsn::fusion

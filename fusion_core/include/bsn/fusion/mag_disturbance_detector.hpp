@@ -1,0 +1,68 @@
+// Magnetic-disturbance detection on field magnitude and dip angle (Fan et al. 2018, sections 2.2.1 and 5.1).
+// A ferromagnetic object changes |m| and the dip angle of the field. One threshold chatters when the field
+// hovers near it, and a filter that takes the samples which happen to dip below it is corrupted (Fan's
+// test E), so the detector uses two thresholds and a minimum duration:
+//   - disturbed as soon as |m| or the dip leaves the outer band (enter thresholds);
+//   - clean again only after both have stayed inside the inner band (leave thresholds) for min_clean_s.
+// The reference magnitude and dip are the first ones seen after reset(), unless set explicitly.
+#pragma once
+
+#include <cstdint>
+
+#include "bsn/fusion/rotation.hpp"
+
+namespace bsn::fusion {
+
+class MagDisturbanceDetector {
+ public:
+  struct Params {
+    /// Disturbed when | |m| - ref | / ref exceeds this fraction. Default 0.10.
+    double norm_enter = 0.10;
+    /// Clean again only below this fraction (<= norm_enter). Default 0.05 (Fan's test E threshold).
+    double norm_leave = 0.05;
+    /// Disturbed when |dip - ref_dip| exceeds this, rad. Default 0.14 rad (8 deg).
+    double dip_enter_rad = 0.14;
+    /// Clean again only below this, rad (<= dip_enter_rad). Default 0.07 rad (4 deg).
+    double dip_leave_rad = 0.07;
+    /// Both must stay inside the leave band this long before the field is trusted again, s. Default 1 s.
+    double min_clean_s = 1.0;
+  };
+
+  struct State {
+    bool reference_known = false;
+    double ref_norm = 0.0;  ///< reference |m|, uT
+    double ref_dip = 0.0;   ///< reference dip angle, rad (positive: field points below horizontal)
+    bool disturbed = false;
+    bool inside_leave_band = false;     ///< the last sample was inside the inner band
+    std::uint64_t inside_since_ns = 0;  ///< start of the current stay inside the inner band
+    double last_norm_deviation = 0.0;   ///< | |m| - ref | / ref of the last sample
+    double last_dip_deviation = 0.0;    ///< |dip - ref_dip| of the last sample, rad
+  };
+
+  /// Throws std::invalid_argument on a non-positive or non-finite parameter, or a leave threshold above its
+  /// enter threshold.
+  explicit MagDisturbanceDetector(const Params& params);
+  MagDisturbanceDetector() : MagDisturbanceDetector(Params{}) {}
+
+  /// Dip angle of the field m seen from a frame whose unit "up" is up, rad: asin(-(m . up) / |m|).
+  static double dip_angle(const Vec3& m, const Vec3& up);
+
+  /// Feeds one magnetometer reading (sensor frame) and the unit up direction in the same frame (e.g. from the
+  /// filter's current orientation, as in Fan's eq. 17). Returns disturbed(). A zero or non-finite field
+  /// counts as disturbed; the first valid reading after reset() becomes the reference.
+  bool update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up);
+
+  /// Fixes the reference instead of learning it from the first reading.
+  void set_reference(double norm_uT, double dip_rad);
+
+  bool disturbed() const { return state_.disturbed; }
+  void reset() { state_ = State{}; }
+  const State& state() const { return state_; }
+
+ private:
+  Params params_;
+  std::uint64_t min_clean_ns_ = 0;
+  State state_;
+};
+
+}  // namespace bsn::fusion

@@ -1,0 +1,49 @@
+// Rest detection: the sensor is resting once the angular rate and the deviation of |acc| from g have stayed
+// below their thresholds for a minimum time. Any filter can own one; it only reads samples.
+#pragma once
+
+#include <cstdint>
+
+#include "bsn/fusion/imu_sample.hpp"
+
+namespace bsn::fusion {
+
+class RestDetector {
+ public:
+  struct Params {
+    /// |gyr| must stay below this, rad/s. Default 0.05 rad/s (2.9 deg/s): above the noise and residual bias
+    /// of a MEMS gyro, below any deliberate human motion.
+    double gyr_threshold_rad_s = 0.05;
+    /// | |acc| - g | must stay below this, m/s^2. Default 0.5 m/s^2.
+    double acc_threshold_m_s2 = 0.5;
+    /// Both must hold for at least this long before `resting` is reported, s. Default 1.5 s.
+    double min_duration_s = 1.5;
+  };
+
+  struct State {
+    bool still = false;                ///< the last sample was below both thresholds
+    std::uint64_t still_since_ns = 0;  ///< timestamp of the first sample of the current still period
+    bool resting = false;
+  };
+
+  /// Throws std::invalid_argument on a non-positive or non-finite parameter.
+  explicit RestDetector(const Params& params);
+  RestDetector() : RestDetector(Params{}) {}
+
+  /// Feeds one (finite) sample; returns resting(). A sample without gyro or accelerometer ends a still period
+  /// (rest cannot be confirmed without both).
+  bool update(const ImuSample& s);
+  bool resting() const { return state_.resting; }
+  void reset() { state_ = State{}; }
+  const State& state() const { return state_; }
+
+ private:
+  Params params_;
+  std::uint64_t min_duration_ns_ = 0;
+  double gyr_threshold_sq_ = 0.0;  ///< gyr_threshold^2, (rad/s)^2
+  double acc_low_sq_ = 0.0;        ///< (g - acc_threshold)^2, or -1 when g - acc_threshold < 0, (m/s^2)^2
+  double acc_high_sq_ = 0.0;       ///< (g + acc_threshold)^2, (m/s^2)^2
+  State state_;
+};
+
+}  // namespace bsn::fusion

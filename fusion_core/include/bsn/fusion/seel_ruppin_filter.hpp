@@ -1,0 +1,139 @@
+// Seel & Ruppin (2017): strapdown prediction with an integral bias estimate (eqs. 13-14), an analytical
+// correction towards the accelerometer (eqs. 7-10) and a heading-only correction towards the magnetometer
+// projected onto the horizontal plane (eqs. 11-12), parametrised by the time constants tau_acc, tau_mag and the
+// overshoot measure zeta (section 2.3):
+//   k_i = dt / (1.4 tau_i + dt),   k_bias,i = zeta^2 / (160 tau_i) * k_i,   i in {acc, mag}.
+// The paper's earth x axis lies along the horizontal magnetic field; ours is ENU (y = magnetic north), so the
+// magnetic reference here is earth y. All corrections are applied in the sensor frame as in the paper.
+#pragma once
+
+#include <cstdint>
+#include <string_view>
+
+#include "bsn/fusion/gyro_bias_lowpass.hpp"
+#include "bsn/fusion/mag_disturbance_detector.hpp"
+#include "bsn/fusion/orientation_filter.hpp"
+#include "bsn/fusion/rest_detector.hpp"
+
+namespace bsn::fusion {
+
+class SeelRuppinFilter final : public OrientationFilter {
+ public:
+  struct Params {
+    /// tau_acc: half-value time of the convergence towards the accelerometer's inclination, s. Larger trusts
+    /// the gyro longer (rejects accelerations of human motion better), smaller removes tilt drift faster.
+    /// Default 2 s (BROAD optimum, flat between 1 and 4 s).
+    double tau_acc_s = 2.0;
+    /// tau_mag: half-value time of the heading convergence towards the magnetometer, s. Larger rides out
+    /// undetected magnetic disturbances longer. Default 4 s (BROAD optimum, with mag_rejection on).
+    double tau_mag_s = 4.0;
+    /// zeta: aggressiveness of the integral bias estimate (overshoot measure); 0 disables bias estimation in
+    /// motion. Default 1: a slow integral (time constant minutes) that tracks bias drift without absorbing the
+    /// accelerations and disturbances of human motion (zeta = 2 costs 0.2 deg on BROAD).
+    double zeta = 1.0;
+    /// Largest inclination error one accelerometer correction acts on, rad: alpha_err,acc is clipped to this
+    /// before k_acc is applied (not in the paper). Human motion brings accelerations of several g for tenths of
+    /// a second; unclipped, each pulls the estimate by k_acc times up to 180 deg (BROAD fast translation: 30 deg
+    /// RMSE). Clipped, a spike moves the estimate by at most max_acc_error_rad / (1.4 tau_acc) rad/s, like the
+    /// bounded step of the GDA, while a true drift (small alpha) is corrected exactly as in the paper. Default
+    /// 0.05 rad (2.9 deg); pi = the paper's filter.
+    double max_acc_error_rad = 0.05;
+    /// 1 = while the sensor is still (every gyro component below bias_omega_min_rad_s for bias_min_static_s),
+    /// the bias estimate also follows the raw rate through the low-pass of Fan eqs. 11-12 (GyroBiasLowPass);
+    /// 0 = the paper's integral estimate only. The integral action learns a bias in minutes at human-motion
+    /// zeta; real recordings start with a bias that rest removes in seconds. Default 1.
+    double rest_bias_lowpass = 1.0;
+    /// Low-pass gyro bias at rest: f_c in Hz, omega_min in rad/s, t_b in s. Defaults 0.05 Hz, 3 deg/s, 2 s (Fan).
+    double bias_corner_frequency_hz = 0.05;
+    double bias_omega_min_rad_s = 3.0 * 0.017453292519943295;
+    double bias_min_static_s = 2.0;
+    /// The bias estimate is clamped to this magnitude per axis, rad/s (a safety net against runaway on bad
+    /// data). Default 0.1 rad/s (5.7 deg/s).
+    double max_gyro_bias_rad_s = 0.1;
+    /// A timestamp gap longer than this re-initialises the orientation from acc + mag (the bias estimate is
+    /// kept: it belongs to the sensor), s. Shorter gaps are bridged with the gyro. Default 1 s.
+    double max_gap_s = 1.0;
+    /// 1 = skip the magnetometer while the disturbance detector flags it; 0 = always use it (the paper's
+    /// filter). Default 1.
+    double mag_rejection = 1.0;
+    /// Magnetic-disturbance detector thresholds (see MagDisturbanceDetector): fractions of the reference
+    /// magnitude, dip angles in rad, duration in s. Defaults 0.10, 0.05, 0.14 rad, 0.07 rad, 1 s.
+    double mag_norm_enter = 0.10;
+    double mag_norm_leave = 0.05;
+    double mag_dip_enter_rad = 0.14;
+    double mag_dip_leave_rad = 0.07;
+    double mag_min_clean_s = 1.0;
+    /// Rest detection (see RestDetector): rad/s, m/s^2, s. Defaults 0.05, 0.5, 1.5.
+    double rest_gyr_rad_s = 0.05;
+    double rest_acc_m_s2 = 0.5;
+    double rest_min_s = 1.5;
+    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
+    double init_period_s = 3.0;
+  };
+
+  /// Quantities derived once from Params.
+  struct Coefficients {
+    double tau_acc_14 = 0.0;       ///< 1.4 tau_acc, s
+    double tau_mag_14 = 0.0;       ///< 1.4 tau_mag, s
+    double bias_factor_acc = 0.0;  ///< zeta^2 / (160 tau_acc), 1/s
+    double bias_factor_mag = 0.0;  ///< zeta^2 / (160 tau_mag), 1/s
+    std::uint64_t max_gap_ns = 0;
+    std::uint64_t init_period_ns = 0;
+    bool acc_clip_test = false;      ///< max_acc_error_rad < pi: clipping can be decided without atan2
+    double sin_max_acc_error = 0.0;  ///< sin(max_acc_error_rad)
+    double cos_max_acc_error = 0.0;  ///< cos(max_acc_error_rad)
+  };
+
+  struct State {
+    Quat q = Quat::Identity();      ///< sensor-to-earth
+    Vec3 gyro_bias = Vec3::Zero();  ///< sensor frame, rad/s; the paper's b is -gyro_bias (eq. 14 adds b)
+    bool initialised = false;
+    bool heading_known = false;     ///< false after an initialisation without magnetometer
+    std::uint64_t last_ns = 0;      ///< timestamp of the last used sample
+    std::uint64_t last_mag_ns = 0;  ///< timestamp of the last used magnetometer reading
+    std::uint64_t init_ns = 0;      ///< timestamp of the last (re)initialisation
+    FilterFlags flags;
+  };
+
+  /// Throws std::invalid_argument on an out-of-range parameter.
+  explicit SeelRuppinFilter(const Params& params);
+  SeelRuppinFilter() : SeelRuppinFilter(Params{}) {}
+
+  UpdateResult update(const ImuSample& sample) override;
+  Quat orientation() const override { return state_.q; }
+  FilterFlags flags() const override { return state_.flags; }
+  Vec3 gyro_bias() const override { return state_.gyro_bias; }
+  bool initialised() const override { return state_.initialised; }
+  void reset() override;
+  std::string_view name() const override { return "seel_ruppin"; }
+
+  const Params& params() const { return params_; }
+  const Coefficients& coefficients() const { return coeff_; }
+  const State& state() const { return state_; }
+
+ private:
+  UpdateResult initialise(const ImuSample& s);
+  void correct_acc(const Vec3& acc, double dt);
+  void correct_mag(const ImuSample& s);
+
+  /// k_i = dt / (1.4 tau_i + dt) for the last dt seen (dt is nearly always the same from sample to sample).
+  struct GainCache {
+    double cached_dt = -1.0;
+    double k = 0.0;
+    double gain(double dt, double tau_14);
+  };
+
+  Params params_;
+  Coefficients coeff_;
+  GainCache acc_gain_;
+  GainCache mag_gain_;
+  State state_;
+  RestDetector rest_;
+  MagDisturbanceDetector mag_detector_;
+  GyroBiasLowPass rest_bias_;
+};
+
+/// Factory entry: "seel_ruppin" with the Params fields as parameter names.
+std::unique_ptr<OrientationFilter> make_seel_ruppin_filter(const FilterSpec& spec);
+
+}  // namespace bsn::fusion

@@ -1,0 +1,266 @@
+#include "bsn/fusion/dlkf_filter.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "bsn/fusion/filter_params.hpp"
+#include "kalman_support.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+constexpr const char* kName = "dlkf";
+using kalman_support::skew;
+using Mat3 = Eigen::Matrix3d;
+using dlkf::Mat6;
+using Mat63 = Eigen::Matrix<double, 6, 3>;
+
+// Keeps Q positive definite along v, where a rotation does not move the vector.
+constexpr double kMinProcessVariance = 1e-14;
+
+constexpr ParamField<DlkfFilter::Params> kParams[] = {
+    {"sigma_g", &DlkfFilter::Params::sigma_g},
+    {"sigma_a", &DlkfFilter::Params::sigma_a},
+    {"sigma_ext_acc", &DlkfFilter::Params::sigma_ext_acc},
+    {"tau_ext_acc_s", &DlkfFilter::Params::tau_ext_acc_s},
+    {"acc_rejection_m_s2", &DlkfFilter::Params::acc_rejection_m_s2},
+    {"sigma_m", &DlkfFilter::Params::sigma_m},
+    {"sigma_mag_disturbance", &DlkfFilter::Params::sigma_mag_disturbance},
+    {"tau_mag_disturbance_s", &DlkfFilter::Params::tau_mag_disturbance_s},
+    {"gyro_bias_lowpass", &DlkfFilter::Params::gyro_bias_lowpass},
+    {"bias_corner_frequency_hz", &DlkfFilter::Params::bias_corner_frequency_hz},
+    {"bias_omega_min_rad_s", &DlkfFilter::Params::bias_omega_min_rad_s},
+    {"bias_min_static_s", &DlkfFilter::Params::bias_min_static_s},
+    {"mag_rejection", &DlkfFilter::Params::mag_rejection},
+    {"mag_magnitude_enter", &DlkfFilter::Params::mag_magnitude_enter},
+    {"mag_magnitude_exit", &DlkfFilter::Params::mag_magnitude_exit},
+    {"mag_dip_enter_rad", &DlkfFilter::Params::mag_dip_enter_rad},
+    {"mag_dip_exit_rad", &DlkfFilter::Params::mag_dip_exit_rad},
+    {"mag_min_clean_s", &DlkfFilter::Params::mag_min_clean_s},
+    {"max_gap_s", &DlkfFilter::Params::max_gap_s},
+    {"rest_gyr_rad_s", &DlkfFilter::Params::rest_gyr_rad_s},
+    {"rest_acc_m_s2", &DlkfFilter::Params::rest_acc_m_s2},
+    {"rest_min_s", &DlkfFilter::Params::rest_min_s},
+    {"init_period_s", &DlkfFilter::Params::init_period_s},
+};
+
+bool is_switch(double v) { return v == 0.0 || v == 1.0; }
+
+// Rotation matrix exp(-[w x] dt): an earth-fixed vector seen from a sensor turning at w.
+// Rodrigues: exp(-[v x]) = I - (sin a / a) [v x] + ((1 - cos a) / a^2) [v x]^2 with v = w dt, a = |v|.
+Mat3 sensor_frame_turn(const Vec3& w, double dt) {
+  const Vec3 v = w * dt;
+  const double a2 = v.squaredNorm();
+  double s1, c1;
+  if (a2 < 0.05 * 0.05) {
+    // Taylor series, truncation error below 1e-16 at a = 0.05 rad per step.
+    s1 = 1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)));
+    c1 = 0.5 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0))));
+  } else {
+    const double a = std::sqrt(a2);
+    s1 = std::sin(a) / a;
+    c1 = (1.0 - std::cos(a)) / a2;
+  }
+  const Mat3 vx = skew(v);
+  return Mat3::Identity() - s1 * vx + c1 * vx * vx;
+}
+
+}  // namespace
+
+namespace dlkf {
+
+void SplitKalman::initialise(const Vec3& y, double var_noise, double var_disturbance) {
+  x.head<3>() = y;
+  x.tail<3>().setZero();
+  p.setZero();
+  p.topLeftCorner<3, 3>().diagonal().setConstant(var_disturbance + var_noise);
+  p.topRightCorner<3, 3>().diagonal().setConstant(-var_disturbance);
+  p.bottomLeftCorner<3, 3>().diagonal().setConstant(-var_disturbance);
+  p.bottomRightCorner<3, 3>().diagonal().setConstant(var_disturbance);
+}
+
+void SplitKalman::predict(const Mat3& turn, double gyro_var_dt, double c, double var_disturbance) {
+  x.head<3>() = turn * x.head<3>();
+  x.tail<3>() *= c;
+  const Mat3 vx = skew(x.head<3>());
+  // P <- F P F^T + Q with F = diag(turn, c I), block by block.
+  Mat6 f_p;
+  f_p.topRows<3>() = turn * p.topRows<3>();
+  f_p.bottomRows<3>() = c * p.bottomRows<3>();
+  p.leftCols<3>() = f_p.leftCols<3>() * turn.transpose();
+  p.rightCols<3>() = c * f_p.rightCols<3>();
+  p.topLeftCorner<3, 3>() += gyro_var_dt * vx * vx.transpose() + kMinProcessVariance * Mat3::Identity();
+  p.bottomRightCorner<3, 3>().diagonal().array() += var_disturbance * (1.0 - c * c) + kMinProcessVariance;
+}
+
+void SplitKalman::correct(const Vec3& y, double var_noise) {
+  // H = [I I]: H P H^T = Pvv + Pvd + Pdv + Pdd, P H^T = [Pvv + Pvd; Pdv + Pdd].
+  const Mat63 pht = p.leftCols<3>() + p.rightCols<3>();
+  const Mat3 s = pht.topRows<3>() + pht.bottomRows<3>() + var_noise * Mat3::Identity();
+  const Mat63 k = pht * s.inverse();
+  x += k * (y - x.head<3>() - x.tail<3>());
+  // Joseph form A P A^T + R K K^T with A = I - K H, using H = [I I]: A M = M - K (H M), M A^T = M - (M H^T) K^T.
+  const Mat6 ap = p - k * (p.topRows<3>() + p.bottomRows<3>());
+  p = ap - (ap.leftCols<3>() + ap.rightCols<3>()) * k.transpose() + var_noise * k * k.transpose();
+}
+
+}  // namespace dlkf
+
+Quat DlkfFilter::triad(const Vec3& up, const Vec3& field) {
+  // Reference triad (eq. 1) in the earth frame, v1 = up, v2 = north; measured triad (eq. 2) in the sensor frame.
+  Mat3 m_ref, m_meas;
+  m_ref.col(0) = Vec3::UnitZ();
+  m_ref.col(1) = Vec3::UnitZ().cross(Vec3::UnitY());
+  m_ref.col(2) = m_ref.col(0).cross(m_ref.col(1));
+  m_meas.col(0) = up.normalized();
+  m_meas.col(1) = m_meas.col(0).cross(field).normalized();
+  m_meas.col(2) = m_meas.col(0).cross(m_meas.col(1));
+  // Eq. 3: A = M_meas M_ref^T maps earth to sensor; the sensor-to-earth rotation is its transpose.
+  return canonical(Quat(Mat3(m_ref * m_meas.transpose())));
+}
+
+DlkfFilter::DlkfFilter(const Params& params)
+    : params_(params),
+      bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}),
+      r_adaption_({params.mag_magnitude_enter, params.mag_magnitude_exit, params.mag_dip_enter_rad,
+                   params.mag_dip_exit_rad, params.mag_min_clean_s}) {
+  require_positive(kName, params.sigma_g, "sigma_g");
+  require_positive(kName, params.sigma_a, "sigma_a");
+  require_positive(kName, params.sigma_ext_acc, "sigma_ext_acc");
+  require_positive(kName, params.tau_ext_acc_s, "tau_ext_acc_s");
+  require_non_negative(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
+  require_positive(kName, params.sigma_m, "sigma_m");
+  require_positive(kName, params.sigma_mag_disturbance, "sigma_mag_disturbance");
+  require_positive(kName, params.tau_mag_disturbance_s, "tau_mag_disturbance_s");
+  if (!is_switch(params.gyro_bias_lowpass)) throw std::invalid_argument("dlkf: gyro_bias_lowpass must be 0 or 1");
+  if (!is_switch(params.mag_rejection)) throw std::invalid_argument("dlkf: mag_rejection must be 0 or 1");
+  require_positive(kName, params.max_gap_s, "max_gap_s");
+  if (params.max_gap_s > 60.0) throw std::invalid_argument("dlkf: max_gap_s must be <= 60 s");
+  require_positive(kName, params.rest_gyr_rad_s, "rest_gyr_rad_s");
+  require_positive(kName, params.rest_acc_m_s2, "rest_acc_m_s2");
+  require_positive(kName, params.rest_min_s, "rest_min_s");
+  require_positive(kName, params.init_period_s, "init_period_s");
+  coeff_.var_g = params.sigma_g * params.sigma_g;
+  coeff_.var_a = params.sigma_a * params.sigma_a;
+  coeff_.var_ext = params.sigma_ext_acc * params.sigma_ext_acc;
+  coeff_.var_m = params.sigma_m * params.sigma_m;
+  coeff_.var_dist = params.sigma_mag_disturbance * params.sigma_mag_disturbance;
+  coeff_.inv_tau_ext = 1.0 / params.tau_ext_acc_s;
+  coeff_.inv_tau_dist = 1.0 / params.tau_mag_disturbance_s;
+  coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
+  coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
+  coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
+}
+
+void DlkfFilter::reset() {
+  state_ = State{};
+  bias_.reset();
+  r_adaption_.reset();
+}
+
+void DlkfFilter::initialise_magnetic(const Vec3& mag) {
+  state_.magnetic.initialise(mag, coeff_.var_m, coeff_.var_dist);
+  state_.have_mag = true;
+  state_.mag_ref_norm = mag.norm();
+  state_.mag_ref_dip = kalman_support::dip_angle(mag, state_.gravity.vector().normalized());
+}
+
+UpdateResult DlkfFilter::initialise(const ImuSample& s) {
+  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
+  const bool mag_usable = s.has_mag && kalman_support::acc_mag_usable(s.acc, s.mag);
+  reset();
+  state_.gravity.initialise(s.acc, coeff_.var_a, coeff_.var_ext);
+  if (mag_usable) {
+    initialise_magnetic(s.mag);
+  } else {
+    // No heading reference yet: carry earth north (zero yaw) with the gyro until a magnetometer sample arrives.
+    const Quat q0 = orientation_from_acc(s.acc);
+    state_.magnetic.initialise(q0.conjugate() * Vec3::UnitY(), coeff_.var_m, coeff_.var_dist);
+  }
+  state_.q = triad(state_.gravity.vector(), state_.magnetic.vector());
+  state_.gyr_prev = s.gyr;
+  state_.have_gyr_prev = s.has_gyr;
+  state_.initialised = true;
+  state_.last_ns = s.timestamp_ns;
+  state_.init_ns = s.timestamp_ns;
+  state_.flags.initialising = true;
+  state_.flags.reinitialised = true;
+  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  return UpdateResult::kInitialised;
+}
+
+UpdateResult DlkfFilter::update(const ImuSample& s) {
+  if (!s.finite()) return UpdateResult::kRejected;
+  if (!state_.initialised) return initialise(s);
+  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
+  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
+
+  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+  state_.last_ns = s.timestamp_ns;
+  state_.flags.reinitialised = false;
+
+  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
+  // Mean of the previous and the current rate: second-order accurate over the step.
+  const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - bias_.bias()) : Vec3::Zero();
+  const Vec3 w = state_.have_gyr_prev ? Vec3(0.5 * (w_now + state_.gyr_prev - bias_.bias())) : w_now;
+  state_.gyr_prev = s.gyr;
+  state_.have_gyr_prev = s.has_gyr;
+  const Mat3 turn = sensor_frame_turn(w, dt);
+  const double gyro_var_dt = coeff_.var_g * dt;
+  if (dt != state_.decay_dt) {  // the step is nearly always the same: the exponentials are computed once
+    state_.decay_dt = dt;
+    state_.decay_ext = std::exp(-dt * coeff_.inv_tau_ext);
+    state_.decay_dist = std::exp(-dt * coeff_.inv_tau_dist);
+  }
+
+  // Filter 1: gravity and external acceleration.
+  state_.gravity.predict(turn, gyro_var_dt, state_.decay_ext, coeff_.var_ext);
+  if (s.has_acc &&
+      (params_.acc_rejection_m_s2 == 0.0 || std::abs(s.acc.norm() - kGravity) <= params_.acc_rejection_m_s2)) {
+    state_.gravity.correct(s.acc, coeff_.var_a);
+  }
+
+  // Filter 2: geomagnetic field and magnetic disturbance.
+  state_.magnetic.predict(turn, gyro_var_dt, state_.decay_dist, coeff_.var_dist);
+  state_.flags.mag_rejected = false;
+  const Vec3 up = state_.gravity.vector().normalized();
+  if (s.has_mag) {
+    if (!state_.have_mag) {
+      if (kalman_support::acc_mag_usable(up, s.mag)) {
+        initialise_magnetic(s.mag);
+      } else {
+        state_.flags.mag_rejected = true;
+      }
+    } else {
+      bool use = true;
+      if (params_.mag_rejection != 0.0) {
+        const double scale = r_adaption_.update(s.timestamp_ns, s.mag.norm() / state_.mag_ref_norm,
+                                                kalman_support::dip_angle(s.mag, up) - state_.mag_ref_dip);
+        use = std::isfinite(scale);
+      }
+      if (use) {
+        state_.magnetic.correct(s.mag, coeff_.var_m);
+      } else {
+        state_.flags.mag_rejected = true;
+      }
+    }
+  }
+  kalman_support::condition_covariance(state_.gravity.p, 1e-18, 1e8);
+  kalman_support::condition_covariance(state_.magnetic.p, 1e-18, 1e8);
+
+  // TRIAD, gravity dominant. A degenerate pair (field along gravity, or a vanished vector) keeps the last q.
+  const Vec3 g = state_.gravity.vector(), h = state_.magnetic.vector();
+  if (g.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad(g, h);
+
+  state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
+                                                     params_.rest_acc_m_s2, coeff_.rest_min_ns);
+  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  return UpdateResult::kUpdated;
+}
+
+std::unique_ptr<OrientationFilter> make_dlkf_filter(const FilterSpec& spec) {
+  return std::make_unique<DlkfFilter>(bind_parameters(kName, spec, kParams));
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,284 @@
+#include "bsn/fusion/ekf_filter.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "bsn/fusion/filter_params.hpp"
+#include "kalman_support.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+constexpr const char* kName = "ekf";
+using kalman_support::skew;
+using Mat3 = Eigen::Matrix3d;
+using Mat4 = Eigen::Matrix4d;
+using Mat43 = Eigen::Matrix<double, 4, 3>;
+using Mat34 = Eigen::Matrix<double, 3, 4>;
+using Mat7 = EkfFilter::Mat7;
+
+// Keeps the covariance positive definite along the (unobservable) norm direction of the quaternion.
+constexpr double kNormDirectionVariance = 1e-12;
+
+constexpr ParamField<EkfFilter::Params> kParams[] = {
+    {"sigma_g", &EkfFilter::Params::sigma_g},
+    {"sigma_bg", &EkfFilter::Params::sigma_bg},
+    {"sigma_a", &EkfFilter::Params::sigma_a},
+    {"sigma_m", &EkfFilter::Params::sigma_m},
+    {"init_attitude_sigma_rad", &EkfFilter::Params::init_attitude_sigma_rad},
+    {"init_bias_sigma_rad_s", &EkfFilter::Params::init_bias_sigma_rad_s},
+    {"mag_rejection", &EkfFilter::Params::mag_rejection},
+    {"mag_magnitude_enter", &EkfFilter::Params::mag_magnitude_enter},
+    {"mag_magnitude_exit", &EkfFilter::Params::mag_magnitude_exit},
+    {"mag_dip_enter_rad", &EkfFilter::Params::mag_dip_enter_rad},
+    {"mag_dip_exit_rad", &EkfFilter::Params::mag_dip_exit_rad},
+    {"mag_min_clean_s", &EkfFilter::Params::mag_min_clean_s},
+    {"max_gap_s", &EkfFilter::Params::max_gap_s},
+    {"rest_gyr_rad_s", &EkfFilter::Params::rest_gyr_rad_s},
+    {"rest_acc_m_s2", &EkfFilter::Params::rest_acc_m_s2},
+    {"rest_min_s", &EkfFilter::Params::rest_min_s},
+    {"init_period_s", &EkfFilter::Params::init_period_s},
+};
+
+// q (x) (0, v) = xi(q) v.
+Mat43 xi(const Quat& q) {
+  Mat43 m;
+  m.row(0) = -q.vec().transpose();
+  m.bottomRows<3>() = q.w() * Mat3::Identity() + skew(q.vec());
+  return m;
+}
+
+// q (x) p = right(p) [w x y z]^T of q.
+Mat4 right_multiplication(const Quat& p) {
+  Mat4 m;
+  m(0, 0) = p.w();
+  m.block<1, 3>(0, 1) = -p.vec().transpose();
+  m.block<3, 1>(1, 0) = p.vec();
+  m.block<3, 3>(1, 1) = p.w() * Mat3::Identity() - skew(p.vec());
+  return m;
+}
+
+Eigen::Vector4d as_vector(const Quat& q) { return {q.w(), q.x(), q.y(), q.z()}; }
+
+// Jacobian of R(q)^T v = (w^2 - |u|^2) v + 2 (u.v) u - 2 w (u x v) with respect to (w, u).
+Mat34 rotate_to_sensor_jacobian(const Quat& q, const Vec3& v) {
+  const double w = q.w();
+  const Vec3 u = q.vec();
+  Mat34 j;
+  j.col(0) = 2.0 * w * v - 2.0 * u.cross(v);
+  j.rightCols<3>() =
+      -2.0 * v * u.transpose() + 2.0 * u.dot(v) * Mat3::Identity() + 2.0 * u * v.transpose() + 2.0 * w * skew(v);
+  return j;
+}
+
+bool is_switch(double v) { return v == 0.0 || v == 1.0; }
+
+}  // namespace
+
+EkfFilter::EkfFilter(const Params& params)
+    : params_(params),
+      r_adaption_({params.mag_magnitude_enter, params.mag_magnitude_exit, params.mag_dip_enter_rad,
+                   params.mag_dip_exit_rad, params.mag_min_clean_s}) {
+  require_positive(kName, params.sigma_g, "sigma_g");
+  require_positive(kName, params.sigma_bg, "sigma_bg");
+  require_positive(kName, params.sigma_a, "sigma_a");
+  require_positive(kName, params.sigma_m, "sigma_m");
+  require_positive(kName, params.init_attitude_sigma_rad, "init_attitude_sigma_rad");
+  require_positive(kName, params.init_bias_sigma_rad_s, "init_bias_sigma_rad_s");
+  if (!is_switch(params.mag_rejection)) throw std::invalid_argument("ekf: parameter mag_rejection must be 0 or 1");
+  require_positive(kName, params.max_gap_s, "max_gap_s");
+  if (params.max_gap_s > 60.0) throw std::invalid_argument("ekf: max_gap_s must be <= 60 s");
+  require_positive(kName, params.rest_gyr_rad_s, "rest_gyr_rad_s");
+  require_positive(kName, params.rest_acc_m_s2, "rest_acc_m_s2");
+  require_positive(kName, params.rest_min_s, "rest_min_s");
+  require_positive(kName, params.init_period_s, "init_period_s");
+  coeff_.var_a = params.sigma_a * params.sigma_a;
+  coeff_.var_m = params.sigma_m * params.sigma_m;
+  coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
+  coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
+  coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
+}
+
+void EkfFilter::reset() {
+  state_ = State{};
+  r_adaption_.reset();
+}
+
+EkfFilter::Mat6 EkfFilter::error_covariance() const {
+  Eigen::Matrix<double, 6, 7> t = Eigen::Matrix<double, 6, 7>::Zero();
+  t.topLeftCorner<3, 4>() = 2.0 * xi(state_.q).transpose();
+  t.bottomRightCorner<3, 3>() = Mat3::Identity();
+  return t * state_.p * t.transpose();
+}
+
+void EkfFilter::set_reference(const Vec3& mag_earth) {
+  state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
+  state_.h_ref_dip = kalman_support::dip_angle(state_.h_ref, Vec3::UnitZ());
+}
+
+UpdateResult EkfFilter::initialise(const ImuSample& s) {
+  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
+  const bool mag_usable = s.has_mag && kalman_support::acc_mag_usable(s.acc, s.mag);
+  reset();
+  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  if (mag_usable) set_reference(state_.q * s.mag);
+  const Mat43 x = xi(state_.q);
+  const Eigen::Vector4d qv = as_vector(state_.q);
+  const double var_att = params_.init_attitude_sigma_rad * params_.init_attitude_sigma_rad;
+  state_.p.setZero();
+  state_.p.topLeftCorner<4, 4>() = 0.25 * var_att * x * x.transpose() + kNormDirectionVariance * qv * qv.transpose();
+  state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(params_.init_bias_sigma_rad_s *
+                                                            params_.init_bias_sigma_rad_s);
+  state_.gyr_prev = s.gyr;
+  state_.have_gyr_prev = s.has_gyr;
+  state_.initialised = true;
+  state_.last_ns = s.timestamp_ns;
+  state_.init_ns = s.timestamp_ns;
+  state_.flags.initialising = true;
+  state_.flags.reinitialised = true;
+  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  return UpdateResult::kInitialised;
+}
+
+template <int M>
+void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
+                        const Eigen::Matrix<double, M, 1>& variances) {
+  // H = [h_q 0] and P = [A B; B^T C] (A 4x4, C 3x3): every product is done on the blocks.
+  using MatM = Eigen::Matrix<double, M, M>;
+  const Mat4 a = state_.p.topLeftCorner<4, 4>();
+  const Eigen::Matrix<double, 4, 3> b = state_.p.topRightCorner<4, 3>();
+  const Mat3 c = state_.p.bottomRightCorner<3, 3>();
+  Eigen::Matrix<double, 7, M> pht;  // P H^T
+  pht.template topRows<4>() = a * h_q.transpose();
+  pht.template bottomRows<3>() = b.transpose() * h_q.transpose();
+  MatM s = h_q * pht.template topRows<4>();
+  s.diagonal() += variances;
+  // S is symmetric positive definite (R > 0): Cholesky, or the closed-form inverse for 3x3.
+  Eigen::Matrix<double, 7, M> k;
+  if constexpr (M == 3) {
+    k = pht * s.inverse();
+  } else {
+    k = s.llt().solve(pht.transpose()).transpose();
+  }
+  const Eigen::Matrix<double, 7, 1> dx = k * residual;
+  const Eigen::Vector4d q = as_vector(state_.q) + dx.head<4>();
+  state_.bias += dx.tail<3>();
+  // Joseph form (I - K H) P (I - K H)^T + K R K^T with I - K H = [G 0; L I], G = I - K_q h_q, L = -K_b h_q.
+  const auto k_q = k.template topRows<4>();
+  const auto k_b = k.template bottomRows<3>();
+  const Mat4 g = Mat4::Identity() - k_q * h_q;
+  const Eigen::Matrix<double, 3, 4> l = -k_b * h_q;
+  const Mat4 ga = g * a;
+  const Eigen::Matrix<double, 7, M> kr = k * variances.asDiagonal();
+  state_.p.topLeftCorner<4, 4>() = ga * g.transpose() + kr.template topRows<4>() * k_q.transpose();
+  const Eigen::Matrix<double, 4, 3> top_right = ga * l.transpose() + g * b + kr.template topRows<4>() * k_b.transpose();
+  state_.p.topRightCorner<4, 3>() = top_right;
+  state_.p.bottomLeftCorner<3, 4>() = top_right.transpose();
+  state_.p.bottomRightCorner<3, 3>() =
+      (l * a + b.transpose()) * l.transpose() + l * b + c + kr.template bottomRows<3>() * k_b.transpose();
+  const double n = q.norm();
+  state_.q = n > 1e-9 ? Quat(q(0) / n, q(1) / n, q(2) / n, q(3) / n) : state_.q;
+}
+
+UpdateResult EkfFilter::update(const ImuSample& s) {
+  if (!s.finite()) return UpdateResult::kRejected;
+  if (!state_.initialised) return initialise(s);
+  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
+  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
+
+  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+  state_.last_ns = s.timestamp_ns;
+  state_.flags.reinitialised = false;
+
+  // Prediction: q <- q (x) exp(w dt), b random walk; F and Q linearised at the new estimate. w is the mean of the
+  // previous and the current bias-corrected rate: second-order accurate, where the current rate alone leaves an
+  // apparent bias of half the angular acceleration times dt.
+  const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - state_.bias) : Vec3::Zero();
+  const Vec3 w = state_.have_gyr_prev ? Vec3(0.5 * (w_now + state_.gyr_prev - state_.bias)) : w_now;
+  state_.gyr_prev = s.gyr;
+  state_.have_gyr_prev = s.has_gyr;
+  const Quat dq = exp_rotation_vector(w * dt);
+  state_.q = (state_.q * dq).normalized();
+  const Mat43 x = xi(state_.q);
+  {
+    // P <- F P F^T + Q_d on blocks: F = [R Y; 0 I] with R = right(dq), Y = -dt/2 Xi(q); P = [A B; B^T C].
+    const Mat4 rot = right_multiplication(dq);
+    const Mat43 y = -0.5 * dt * x;
+    const Mat4 a = state_.p.topLeftCorner<4, 4>();
+    const Mat43 b = state_.p.topRightCorner<4, 3>();
+    const Mat3 c = state_.p.bottomRightCorner<3, 3>();
+    const Mat43 top_right = rot * b + y * c;
+    state_.p.topLeftCorner<4, 4>() = (rot * a + y * b.transpose()) * rot.transpose() + top_right * y.transpose() +
+                                     (0.25 * params_.sigma_g * params_.sigma_g * dt) * x * x.transpose();
+    state_.p.topRightCorner<4, 3>() = top_right;
+    state_.p.bottomLeftCorner<3, 4>() = top_right.transpose();
+    state_.p.bottomRightCorner<3, 3>().diagonal().array() += params_.sigma_bg * params_.sigma_bg * dt;
+  }
+
+  // Magnetometer: usable unless the R-adaption sets its variance to infinity.
+  bool use_mag = false;
+  state_.flags.mag_rejected = false;
+  const Vec3 up = state_.q.conjugate() * Vec3::UnitZ();
+  if (s.has_mag) {
+    if (state_.h_ref.isZero()) {
+      // Initialised without a magnetometer: the first usable one sets the heading and the reference.
+      if (kalman_support::acc_mag_usable(up, s.mag)) {
+        const Vec3 m_earth = state_.q * s.mag;
+        state_.q =
+            (Quat(Eigen::AngleAxisd(std::atan2(m_earth.x(), m_earth.y()), Vec3::UnitZ())) * state_.q).normalized();
+        set_reference(state_.q * s.mag);
+      } else {
+        state_.flags.mag_rejected = true;
+      }
+    } else {
+      use_mag = true;
+      if (params_.mag_rejection != 0.0) {
+        const double scale = r_adaption_.update(s.timestamp_ns, s.mag.norm() / state_.h_ref.norm(),
+                                                kalman_support::dip_angle(s.mag, up) - state_.h_ref_dip);
+        use_mag = std::isfinite(scale);
+        state_.flags.mag_rejected = !use_mag;
+      }
+    }
+  }
+  const bool use_acc = s.has_acc && s.acc.norm() > 1e-6;
+  const Vec3 g_earth(0.0, 0.0, kGravity);
+  if (use_acc && use_mag) {
+    // One joint update: this is what couples the magnetometer into roll and pitch.
+    Eigen::Matrix<double, 6, 1> r, var;
+    Eigen::Matrix<double, 6, 4> h;
+    r.head<3>() = s.acc - state_.q.conjugate() * g_earth;
+    r.tail<3>() = s.mag - state_.q.conjugate() * state_.h_ref;
+    h.topRows<3>() = rotate_to_sensor_jacobian(state_.q, g_earth);
+    h.bottomRows<3>() = rotate_to_sensor_jacobian(state_.q, state_.h_ref);
+    var << coeff_.var_a, coeff_.var_a, coeff_.var_a, coeff_.var_m, coeff_.var_m, coeff_.var_m;
+    correct<6>(r, h, var);
+  } else if (use_acc || use_mag) {
+    const Vec3 ref = use_acc ? g_earth : state_.h_ref;
+    const Vec3 meas = use_acc ? s.acc : s.mag;
+    const Mat34 h = rotate_to_sensor_jacobian(state_.q, ref);
+    const Vec3 r = meas - state_.q.conjugate() * ref;
+    correct<3>(r, h, Vec3::Constant(use_acc ? coeff_.var_a : coeff_.var_m));
+  }
+
+  // The norm is not a degree of freedom: project the covariance onto the tangent space of the unit sphere.
+  const Eigen::Vector4d qv = as_vector(state_.q);
+  const Mat4 j = Mat4::Identity() - qv * qv.transpose();  // J = diag(j, I)
+  const Mat43 jb = j * state_.p.topRightCorner<4, 3>();
+  state_.p.topLeftCorner<4, 4>() = j * state_.p.topLeftCorner<4, 4>() * j.transpose();
+  state_.p.topLeftCorner<4, 4>() += kNormDirectionVariance * qv * qv.transpose();
+  state_.p.topRightCorner<4, 3>() = jb;
+  state_.p.bottomLeftCorner<3, 4>() = jb.transpose();
+  kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
+
+  state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
+                                                     params_.rest_acc_m_s2, coeff_.rest_min_ns);
+  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  return UpdateResult::kUpdated;
+}
+
+std::unique_ptr<OrientationFilter> make_ekf_filter(const FilterSpec& spec) {
+  return std::make_unique<EkfFilter>(bind_parameters(kName, spec, kParams));
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,199 @@
+#include "bsn/fusion/iecf_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "bsn/fusion/filter_params.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+using P = IecfFilter::Params;
+constexpr ParamField<P> kParams[] = {
+    {"gain", &P::gain},
+    {"initial_gain", &P::initial_gain},
+    {"init_period_s", &P::init_period_s},
+    {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
+    {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
+    {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
+    {"bias_min_static_s", &P::bias_min_static_s},
+    {"mag_rejection", &P::mag_rejection},
+    {"mag_norm_enter", &P::mag_norm_enter},
+    {"mag_norm_leave", &P::mag_norm_leave},
+    {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
+    {"mag_dip_leave_rad", &P::mag_dip_leave_rad},
+    {"mag_min_clean_s", &P::mag_min_clean_s},
+    {"max_gap_s", &P::max_gap_s},
+    {"rest_gyr_rad_s", &P::rest_gyr_rad_s},
+    {"rest_acc_m_s2", &P::rest_acc_m_s2},
+    {"rest_min_s", &P::rest_min_s},
+};
+
+std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
+
+void require_switch(std::string_view name, double value, const char* param) {
+  if (value != 0.0 && value != 1.0) {
+    throw std::invalid_argument(std::string(name) + ": parameter " + param + " must be 0 or 1, got " +
+                                std::to_string(value));
+  }
+}
+
+const P& checked(const P& p, std::string_view name) {
+  require_positive(name, p.gain, "gain");
+  require_positive(name, p.initial_gain, "initial_gain");
+  require_positive(name, p.init_period_s, "init_period_s");
+  require_positive(name, p.max_gap_s, "max_gap_s");
+  require_switch(name, p.gyro_bias_lowpass, "gyro_bias_lowpass");
+  require_switch(name, p.mag_rejection, "mag_rejection");
+  return p;
+}
+
+// exp_rotation_vector(v) without trig for the angles of one sample step (|v| < 0.2 rad): cos(h) and sin(h) / h,
+// h = |v| / 2, as Taylor series in h^2 (truncation below 1e-20). Larger angles take the exact trig path.
+Quat exp_rotation_vector_fast(const Vec3& v) {
+  const double h2 = 0.25 * v.squaredNorm();
+  if (!(h2 < 1e-2)) return exp_rotation_vector(v);
+  const double c =
+      1.0 - h2 * (1.0 / 2) *
+                (1.0 - h2 * (1.0 / 12) * (1.0 - h2 * (1.0 / 30) * (1.0 - h2 * (1.0 / 56) * (1.0 - h2 * (1.0 / 90)))));
+  const double s =
+      0.5 * (1.0 - h2 * (1.0 / 6) *
+                       (1.0 - h2 * (1.0 / 20) *
+                                  (1.0 - h2 * (1.0 / 42) * (1.0 - h2 * (1.0 / 72) * (1.0 - h2 * (1.0 / 110))))));
+  return Quat(c, s * v.x(), s * v.y(), s * v.z());
+}
+
+// Earth axes in sensor coordinates, q* (x) e (x) q for a unit q: the rows of R(q).
+Vec3 up_in_sensor(const Quat& q) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  return Vec3(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y));
+}
+
+Vec3 east_in_sensor(const Quat& q) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  return Vec3(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y));
+}
+
+}  // namespace
+
+IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
+    : params_(checked(params, use_magnetometer ? "iecf" : "iecf6")),
+      use_magnetometer_(use_magnetometer),
+      rest_({params.rest_gyr_rad_s, params.rest_acc_m_s2, params.rest_min_s}),
+      bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}),
+      mag_detector_({params.mag_norm_enter, params.mag_norm_leave, params.mag_dip_enter_rad, params.mag_dip_leave_rad,
+                     params.mag_min_clean_s}) {
+  coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
+  coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
+}
+
+double IecfFilter::gain_at(double since_init_s) const {
+  if (!(since_init_s < params_.init_period_s)) return params_.gain;
+  const double fraction = std::max(0.0, since_init_s) / params_.init_period_s;
+  return params_.initial_gain + (params_.gain - params_.initial_gain) * fraction;
+}
+
+void IecfFilter::reset() {
+  state_ = State{};
+  rest_.reset();
+  bias_.reset();
+  mag_detector_.reset();
+}
+
+UpdateResult IecfFilter::initialise(const ImuSample& s) {
+  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
+  // IECF6 too takes its initial heading from the magnetometer when there is one (Fan's IECF6 "with the
+  // alignment of the initial yaw angle"); afterwards it never reads it again.
+  const bool with_mag = s.has_mag && s.mag.norm() > 1e-9 && s.acc.norm() > 1e-6 &&
+                        s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
+  state_.q = with_mag ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  state_.initialised = true;
+  state_.heading_known = with_mag;
+  state_.last_ns = s.timestamp_ns;
+  state_.last_mag_ns = with_mag ? s.timestamp_ns : 0;
+  state_.init_ns = s.timestamp_ns;
+  state_.flags = FilterFlags{};
+  state_.flags.initialising = true;
+  state_.flags.reinitialised = true;
+  state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
+  rest_.reset();
+  mag_detector_.reset();
+  if (with_mag && use_magnetometer_) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());
+  state_.flags.resting = rest_.update(s);
+  return UpdateResult::kInitialised;
+}
+
+UpdateResult IecfFilter::update(const ImuSample& s) {
+  if (!s.finite()) return UpdateResult::kRejected;
+  if (!state_.initialised) return initialise(s);
+  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
+  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);  // the bias estimate is kept
+
+  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+  const double gain = gain_at(static_cast<double>(s.timestamp_ns - state_.init_ns) * 1e-9);
+  const MagDisturbanceDetector detector_before = mag_detector_;
+  Quat q = state_.q;
+  bool mag_used = false;
+  bool mag_rejected = false;
+
+  Vec3 error = Vec3::Zero();
+  const double acc_squared_norm = s.has_acc ? s.acc.squaredNorm() : 0.0;
+  if (acc_squared_norm > 1e-12) {
+    const Vec3 a = s.acc / std::sqrt(acc_squared_norm);
+    const Vec3 up_est = up_in_sensor(q);
+    error += a.cross(up_est);  // e_a: measured x predicted up
+    // mag_usable(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|.
+    const double mag_squared_norm = use_magnetometer_ && s.has_mag ? s.mag.squaredNorm() : 0.0;
+    if (mag_squared_norm > 1e-18 && (s.mag / std::sqrt(mag_squared_norm)).cross(a).squaredNorm() > 1e-6) {
+      if (params_.mag_rejection != 0.0 && mag_detector_.update(s.timestamp_ns, s.mag, up_est)) {
+        mag_rejected = true;
+      } else if (!state_.heading_known) {
+        q = orientation_from_acc_mag(s.acc, s.mag);  // first heading after a start without magnetometer
+        mag_used = true;
+      } else {
+        const Vec3 east_measured = s.mag.cross(a).normalized();  // north x up = east (ENU x)
+        const Vec3 east_predicted = east_in_sensor(q);
+        // Weighted by the time since the last used reading, so the heading gain holds per second with a
+        // magnetometer slower than the IMU.
+        const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
+        const double weight = (state_.last_mag_ns != 0 && since_mag <= coeff_.max_gap_ns)
+                                  ? static_cast<double>(since_mag) * 1e-9 / dt
+                                  : 1.0;
+        error += weight * east_measured.cross(east_predicted);  // e_m (virtual east, section 2.1.2)
+        mag_used = true;
+      }
+    } else if (use_magnetometer_ && s.has_mag) {
+      mag_rejected = true;  // zero field or field along gravity: no heading information
+    }
+  }
+
+  const Vec3 rate = !s.has_gyr ? Vec3::Zero() : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
+  q = (q * exp_rotation_vector_fast((rate + gain * error) * dt)).normalized();  // eqs. 14-15, exact for the step
+  if (!q.coeffs().allFinite()) {
+    mag_detector_ = detector_before;  // extreme finite input: keep the state
+    return UpdateResult::kRejected;
+  }
+
+  state_.q = q;
+  state_.last_ns = s.timestamp_ns;
+  if (mag_used) {
+    state_.heading_known = true;
+    state_.last_mag_ns = s.timestamp_ns;
+  }
+  state_.flags.reinitialised = false;
+  state_.flags.mag_rejected = mag_rejected;
+  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
+  state_.flags.resting = rest_.update(s);
+  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  return UpdateResult::kUpdated;
+}
+
+std::unique_ptr<OrientationFilter> make_iecf_filter(const FilterSpec& spec) {
+  return std::make_unique<IecfFilter>(bind_parameters("iecf", spec, kParams), true);
+}
+
+std::unique_ptr<OrientationFilter> make_iecf6_filter(const FilterSpec& spec) {
+  return std::make_unique<IecfFilter>(bind_parameters("iecf6", spec, kParams), false);
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,70 @@
+#include "bsn/fusion/mag_disturbance_detector.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "bsn/fusion/filter_params.hpp"
+
+namespace bsn::fusion {
+
+MagDisturbanceDetector::MagDisturbanceDetector(const Params& params) : params_(params) {
+  constexpr const char* kName = "magnetic disturbance detector";
+  require_positive(kName, params.norm_enter, "mag_norm_enter");
+  require_positive(kName, params.norm_leave, "mag_norm_leave");
+  require_positive(kName, params.dip_enter_rad, "mag_dip_enter_rad");
+  require_positive(kName, params.dip_leave_rad, "mag_dip_leave_rad");
+  require_positive(kName, params.min_clean_s, "mag_min_clean_s");
+  if (params.norm_leave > params.norm_enter || params.dip_leave_rad > params.dip_enter_rad) {
+    throw std::invalid_argument(std::string(kName) +
+                                ": a leave threshold must not exceed its enter threshold (mag_norm_leave <= "
+                                "mag_norm_enter, mag_dip_leave_rad <= mag_dip_enter_rad)");
+  }
+  min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.min_clean_s * 1e9));
+}
+
+double MagDisturbanceDetector::dip_angle(const Vec3& m, const Vec3& up) {
+  const double norm = m.norm();
+  if (!(norm > 0.0)) return 0.0;
+  return std::asin(std::clamp(-m.dot(up) / norm, -1.0, 1.0));
+}
+
+void MagDisturbanceDetector::set_reference(double norm_uT, double dip_rad) {
+  state_.reference_known = norm_uT > 0.0 && std::isfinite(norm_uT) && std::isfinite(dip_rad);
+  state_.ref_norm = state_.reference_known ? norm_uT : 0.0;
+  state_.ref_dip = state_.reference_known ? dip_rad : 0.0;
+}
+
+bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up) {
+  const double norm = mag.norm();
+  if (!std::isfinite(norm) || !(norm > 1e-9) || !up.allFinite()) {
+    state_.disturbed = true;
+    state_.inside_leave_band = false;
+    return true;
+  }
+  const double dip = dip_angle(mag, up);
+  if (!state_.reference_known) set_reference(norm, dip);
+
+  state_.last_norm_deviation = std::abs(norm - state_.ref_norm) / state_.ref_norm;
+  state_.last_dip_deviation = std::abs(dip - state_.ref_dip);
+  const bool outside_enter_band =
+      state_.last_norm_deviation > params_.norm_enter || state_.last_dip_deviation > params_.dip_enter_rad;
+  const bool inside_leave_band =
+      state_.last_norm_deviation < params_.norm_leave && state_.last_dip_deviation < params_.dip_leave_rad;
+
+  if (!inside_leave_band) {
+    state_.inside_leave_band = false;
+  } else if (!state_.inside_leave_band || t_ns < state_.inside_since_ns) {
+    state_.inside_leave_band = true;
+    state_.inside_since_ns = t_ns;
+  }
+
+  if (outside_enter_band) {
+    state_.disturbed = true;
+  } else if (state_.disturbed && state_.inside_leave_band && t_ns - state_.inside_since_ns >= min_clean_ns_) {
+    state_.disturbed = false;
+  }
+  return state_.disturbed;
+}
+
+}  // namespace bsn::fusion

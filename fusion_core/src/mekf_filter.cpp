@@ -1,0 +1,380 @@
+#include "bsn/fusion/mekf_filter.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "bsn/fusion/filter_params.hpp"
+#include "kalman_support.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+using kalman_support::skew;
+using mekf::Mat3;
+using mekf::Mat6;
+
+constexpr ParamField<MekfFilter::Params> kParams[] = {
+    {"preset", &MekfFilter::Params::preset},
+    {"sigma_g", &MekfFilter::Params::sigma_g},
+    {"sigma_bg", &MekfFilter::Params::sigma_bg},
+    {"sigma_a", &MekfFilter::Params::sigma_a},
+    {"sigma_m", &MekfFilter::Params::sigma_m},
+    {"init_attitude_sigma_rad", &MekfFilter::Params::init_attitude_sigma_rad},
+    {"init_bias_sigma_rad_s", &MekfFilter::Params::init_bias_sigma_rad_s},
+    {"mag_rejection", &MekfFilter::Params::mag_rejection},
+    {"mag_magnitude_enter", &MekfFilter::Params::mag_magnitude_enter},
+    {"mag_magnitude_exit", &MekfFilter::Params::mag_magnitude_exit},
+    {"mag_dip_enter_rad", &MekfFilter::Params::mag_dip_enter_rad},
+    {"mag_dip_exit_rad", &MekfFilter::Params::mag_dip_exit_rad},
+    {"mag_min_clean_s", &MekfFilter::Params::mag_min_clean_s},
+    {"max_gap_s", &MekfFilter::Params::max_gap_s},
+    {"rest_gyr_rad_s", &MekfFilter::Params::rest_gyr_rad_s},
+    {"rest_acc_m_s2", &MekfFilter::Params::rest_acc_m_s2},
+    {"rest_min_s", &MekfFilter::Params::rest_min_s},
+    {"init_period_s", &MekfFilter::Params::init_period_s},
+    {"static_gyr_rad_s", &MekfFilter::Params::static_gyr_rad_s},
+    {"static_acc_m_s2", &MekfFilter::Params::static_acc_m_s2},
+    {"slow_gyr_rad_s", &MekfFilter::Params::slow_gyr_rad_s},
+    {"slow_acc_m_s2", &MekfFilter::Params::slow_acc_m_s2},
+    {"intermediate_gyr_rad_s", &MekfFilter::Params::intermediate_gyr_rad_s},
+    {"intermediate_acc_m_s2", &MekfFilter::Params::intermediate_acc_m_s2},
+    {"intensity_hold_s", &MekfFilter::Params::intensity_hold_s},
+    {"min_switch_interval_s", &MekfFilter::Params::min_switch_interval_s},
+};
+
+// Below this rotation angle per step the closed forms lose digits to cancellation; their Taylor series are used.
+constexpr double kSeriesAngle = 0.05;
+
+MagneticRAdaption::Params r_adaption_params(const MekfFilter::Params& p) {
+  return {p.mag_magnitude_enter, p.mag_magnitude_exit, p.mag_dip_enter_rad, p.mag_dip_exit_rad, p.mag_min_clean_s};
+}
+
+int preset_index(std::string_view filter, double preset) {
+  if (!(preset == 0.0 || preset == 1.0 || preset == 2.0 || preset == 3.0)) {
+    throw std::invalid_argument(std::string(filter) +
+                                ": parameter preset must be 0 (static), 1 (slow), 2 "
+                                "(intermediate) or 3 (fast), got " +
+                                std::to_string(preset));
+  }
+  return static_cast<int>(preset);
+}
+
+bool is_switch(double v) { return v == 0.0 || v == 1.0; }
+
+}  // namespace
+
+namespace {
+
+// Theta, Psi and Q_d of the prediction as 3x3 blocks (Phi = [Theta Psi; 0 I], Q_d = [q11 q12; q12^T q22 I]), from
+// one set of closed-form coefficients shared by both.
+struct PredictionBlocks {
+  Mat3 theta, psi, q11, q12;
+  double q22;
+};
+
+PredictionBlocks prediction_blocks(const Vec3& w, double T, double sigma_g, double sigma_bg) {
+  const double wn = w.norm();
+  const double u = wn * T;
+  // s1 = sin(u)/|w|, c1 = (1 - cos u)/|w|^2, a1 = (u - sin u)/|w|^3, a2 = (u^2/2 - 1 + cos u)/|w|^4,
+  // a3 = (u^3/3 - 2u + 2 sin u)/|w|^5.
+  double s1, c1, a1, a2, a3;
+  if (u < kSeriesAngle) {
+    const double u2 = u * u, T2 = T * T, T3 = T2 * T;
+    s1 = T * (1.0 - u2 / 6.0 + u2 * u2 / 120.0);
+    c1 = T2 * (0.5 - u2 / 24.0 + u2 * u2 / 720.0);
+    a1 = T3 * (1.0 / 6.0 - u2 / 120.0 + u2 * u2 / 5040.0);
+    a2 = T3 * T * (1.0 / 24.0 - u2 / 720.0 + u2 * u2 / 40320.0);
+    a3 = T3 * T2 * (1.0 / 60.0 - u2 / 2520.0 + u2 * u2 / 181440.0);
+  } else {
+    const double w2 = wn * wn, sin_u = std::sin(u), cos_u = std::cos(u);
+    s1 = sin_u / wn;
+    c1 = (1.0 - cos_u) / w2;
+    a1 = (u - sin_u) / (w2 * wn);
+    a2 = (0.5 * u * u - 1.0 + cos_u) / (w2 * w2);
+    a3 = (u * u * u / 3.0 - 2.0 * u + 2.0 * sin_u) / (w2 * w2 * wn);
+  }
+  const Mat3 W = skew(w);
+  const Mat3 W2 = W * W;
+  const Mat3 I = Mat3::Identity();
+  const double g2 = sigma_g * sigma_g, b2 = sigma_bg * sigma_bg;
+  PredictionBlocks out;
+  out.theta = I - s1 * W + c1 * W2;
+  out.psi = -(T * I - c1 * W + a1 * W2);
+  out.q11 = g2 * T * I + b2 * (I * (T * T * T / 3.0) + a3 * W2);
+  out.q12 = -b2 * (I * (T * T / 2.0) - a1 * W + a2 * W2);
+  out.q22 = b2 * T;
+  return out;
+}
+
+}  // namespace
+
+namespace mekf {
+
+Quat integrate(const Quat& q, const Vec3& w_prev, const Vec3& w_now, double T) {
+  const Vec3 w_mean = 0.5 * (w_prev + w_now);
+  Quat dq = kalman_support::rotation_from_vector(w_mean * T);
+  // Second Magnus term for a rate varying linearly over the step (the paper's 1/48 commutator term).
+  dq.vec() += (T * T / 24.0) * w_prev.cross(w_now);
+  return (q * dq).normalized();
+}
+
+Mat6 transition(const Vec3& w, double T) {
+  const PredictionBlocks b = prediction_blocks(w, T, 0.0, 0.0);
+  Mat6 phi = Mat6::Identity();
+  phi.topLeftCorner<3, 3>() = b.theta;
+  phi.topRightCorner<3, 3>() = b.psi;
+  return phi;
+}
+
+Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg) {
+  const PredictionBlocks b = prediction_blocks(w, T, sigma_g, sigma_bg);
+  Mat6 q;
+  q.topLeftCorner<3, 3>() = b.q11;
+  q.topRightCorner<3, 3>() = b.q12;
+  q.bottomLeftCorner<3, 3>() = b.q12.transpose();
+  q.bottomRightCorner<3, 3>() = b.q22 * Mat3::Identity();
+  return q;
+}
+
+}  // namespace mekf
+
+MekfFilter::MekfFilter(const Params& params, bool adaptive)
+    : params_(params), adaptive_(adaptive), r_adaption_(r_adaption_params(params)) {
+  const std::string_view n = adaptive ? "mekf_adaptive" : "mekf";
+  coeff_.start_intensity = preset_index(n, params.preset);
+  coeff_.noise = kNezTable3[static_cast<std::size_t>(coeff_.start_intensity)];
+  const double overrides[] = {params.sigma_g, params.sigma_bg, params.sigma_a, params.sigma_m};
+  const char* names[] = {"sigma_g", "sigma_bg", "sigma_a", "sigma_m"};
+  double* targets[] = {&coeff_.noise.sigma_g, &coeff_.noise.sigma_bg, &coeff_.noise.sigma_a, &coeff_.noise.sigma_m};
+  for (int i = 0; i < 4; ++i) {
+    require_non_negative(n, overrides[i], names[i]);
+    if (overrides[i] > 0.0) {
+      if (adaptive) {
+        throw std::invalid_argument("mekf_adaptive: parameter " + std::string(names[i]) +
+                                    " cannot be set; the adaptive filter takes every set from Table 3 (use preset)");
+      }
+      *targets[i] = overrides[i];
+    }
+  }
+  require_positive(n, params.init_attitude_sigma_rad, "init_attitude_sigma_rad");
+  require_positive(n, params.init_bias_sigma_rad_s, "init_bias_sigma_rad_s");
+  if (!is_switch(params.mag_rejection)) {
+    throw std::invalid_argument(std::string(n) + ": parameter mag_rejection must be 0 or 1");
+  }
+  require_positive(n, params.max_gap_s, "max_gap_s");
+  require_positive(n, params.rest_gyr_rad_s, "rest_gyr_rad_s");
+  require_positive(n, params.rest_acc_m_s2, "rest_acc_m_s2");
+  require_positive(n, params.rest_min_s, "rest_min_s");
+  require_positive(n, params.init_period_s, "init_period_s");
+  require_positive(n, params.static_gyr_rad_s, "static_gyr_rad_s");
+  require_positive(n, params.static_acc_m_s2, "static_acc_m_s2");
+  require_positive(n, params.slow_gyr_rad_s, "slow_gyr_rad_s");
+  require_positive(n, params.slow_acc_m_s2, "slow_acc_m_s2");
+  require_positive(n, params.intermediate_gyr_rad_s, "intermediate_gyr_rad_s");
+  require_positive(n, params.intermediate_acc_m_s2, "intermediate_acc_m_s2");
+  require_non_negative(n, params.intensity_hold_s, "intensity_hold_s");
+  require_non_negative(n, params.min_switch_interval_s, "min_switch_interval_s");
+  if (!(params.static_gyr_rad_s < params.slow_gyr_rad_s && params.slow_gyr_rad_s < params.intermediate_gyr_rad_s &&
+        params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
+    throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
+  }
+  if (params.max_gap_s > 60.0) throw std::invalid_argument(std::string(n) + ": max_gap_s must be <= 60 s");
+  coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
+  coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
+  coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
+  coeff_.intensity_hold_ns = kalman_support::seconds_to_ns(params.intensity_hold_s);
+  coeff_.min_switch_interval_ns = kalman_support::seconds_to_ns(params.min_switch_interval_s);
+  reset();
+}
+
+void MekfFilter::reset() {
+  state_ = State{};
+  state_.intensity = coeff_.start_intensity;
+  r_adaption_.reset();
+}
+
+MekfNoise MekfFilter::noise() const {
+  return adaptive_ ? kNezTable3[static_cast<std::size_t>(state_.intensity)] : coeff_.noise;
+}
+
+void MekfFilter::set_reference(const Vec3& mag_earth) {
+  // Only the horizontal magnitude and the vertical component matter: the reference points to magnetic north.
+  state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
+  state_.h_ref_dip = kalman_support::dip_angle(state_.h_ref, Vec3::UnitZ());
+}
+
+UpdateResult MekfFilter::initialise(const ImuSample& s) {
+  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
+  const bool mag_usable = s.has_mag && kalman_support::acc_mag_usable(s.acc, s.mag);
+  reset();
+  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  if (mag_usable) set_reference(state_.q * s.mag);
+  state_.p.setZero();
+  state_.p.topLeftCorner<3, 3>().diagonal().setConstant(params_.init_attitude_sigma_rad *
+                                                        params_.init_attitude_sigma_rad);
+  state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(params_.init_bias_sigma_rad_s *
+                                                            params_.init_bias_sigma_rad_s);
+  state_.initialised = true;
+  state_.last_ns = s.timestamp_ns;
+  state_.init_ns = s.timestamp_ns;
+  state_.last_switch_ns = s.timestamp_ns;
+  state_.flags.initialising = true;
+  state_.flags.reinitialised = true;
+  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  return UpdateResult::kInitialised;
+}
+
+int MekfFilter::classify(const ImuSample& s) const {
+  const double ext = s.has_acc ? std::abs(s.acc.norm() - kGravity) : 0.0;
+  const double rate = s.has_gyr ? (s.gyr - state_.bias).norm() : 0.0;
+  auto level = [](double v, double t0, double t1, double t2) { return v < t0 ? 0 : v < t1 ? 1 : v < t2 ? 2 : 3; };
+  return std::max(level(ext, params_.static_acc_m_s2, params_.slow_acc_m_s2, params_.intermediate_acc_m_s2),
+                  level(rate, params_.static_gyr_rad_s, params_.slow_gyr_rad_s, params_.intermediate_gyr_rad_s));
+}
+
+void MekfFilter::adapt(const ImuSample& s) {
+  const std::uint64_t t = s.timestamp_ns;
+  const auto c = static_cast<std::size_t>(classify(s));
+  state_.class_seen[c] = true;
+  state_.class_seen_ns[c] = t;
+  int candidate = 0;
+  for (int k = 3; k >= 0; --k) {
+    const auto i = static_cast<std::size_t>(k);
+    if (state_.class_seen[i] && t - state_.class_seen_ns[i] <= coeff_.intensity_hold_ns) {
+      candidate = k;
+      break;
+    }
+  }
+  if (candidate != state_.intensity && t - state_.last_switch_ns >= coeff_.min_switch_interval_ns) {
+    state_.intensity = candidate;
+    state_.last_switch_ns = t;
+    ++state_.switches;
+  }
+}
+
+void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n) {
+  // H = [[z x] 0]; with P = [A B; B^T C] every product is done on 3x3 blocks (no 6x6 products).
+  const Vec3 z_hat = state_.q.conjugate() * Vec3(0.0, 0.0, kGravity);
+  const Mat3 hx = skew(z_hat);
+  const double r = n.sigma_a * n.sigma_a;
+  const Mat3 a = state_.p.topLeftCorner<3, 3>();
+  const Mat3 b = state_.p.topRightCorner<3, 3>();
+  const Mat3 c = state_.p.bottomRightCorner<3, 3>();
+  const Mat3 s = hx * a * hx.transpose() + r * Mat3::Identity();
+  const Mat3 s_inv = s.inverse();
+  const Mat3 ka = a * hx.transpose() * s_inv;              // attitude rows of K
+  const Mat3 kb = b.transpose() * hx.transpose() * s_inv;  // bias rows of K
+  const Vec3 residual = acc - z_hat;
+  state_.q = (state_.q * kalman_support::rotation_from_vector(ka * residual)).normalized();
+  state_.bias += kb * residual;
+  // Joseph form (I - K H) P (I - K H)^T + K R K^T: stays symmetric positive definite under rounding.
+  // I - K H = [G 0; L I] with G = I - ka hx, L = -kb hx.
+  const Mat3 g = Mat3::Identity() - ka * hx;
+  const Mat3 l = -kb * hx;
+  const Mat3 ga = g * a;
+  const Mat3 top_right = ga * l.transpose() + g * b + r * ka * kb.transpose();
+  state_.p.topLeftCorner<3, 3>() = ga * g.transpose() + r * ka * ka.transpose();
+  state_.p.topRightCorner<3, 3>() = top_right;
+  state_.p.bottomLeftCorner<3, 3>() = top_right.transpose();
+  state_.p.bottomRightCorner<3, 3>() = (l * a + b.transpose()) * l.transpose() + l * b + c + r * kb * kb.transpose();
+}
+
+void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
+  state_.flags.mag_rejected = false;
+  if (state_.h_ref.isZero()) {
+    // Initialised without a usable magnetometer: the first usable one sets the heading and the reference.
+    const Vec3 up = state_.q.conjugate() * Vec3::UnitZ();
+    if (!kalman_support::acc_mag_usable(up, s.mag)) {
+      state_.flags.mag_rejected = true;
+      return;
+    }
+    const Vec3 m_earth = state_.q * s.mag;
+    const double heading_error = std::atan2(m_earth.x(), m_earth.y());
+    state_.q = (Quat(Eigen::AngleAxisd(heading_error, Vec3::UnitZ())) * state_.q).normalized();
+    set_reference(state_.q * s.mag);
+    return;
+  }
+  const Vec3 r3 = state_.q.conjugate() * Vec3::UnitZ();  // earth vertical in the sensor frame
+  if (params_.mag_rejection != 0.0) {
+    const double ref_norm = state_.h_ref.norm();
+    const double scale = r_adaption_.update(s.timestamp_ns, s.mag.norm() / ref_norm,
+                                            kalman_support::dip_angle(s.mag, r3) - state_.h_ref_dip);
+    if (!std::isfinite(scale)) {
+      state_.flags.mag_rejected = true;
+      return;
+    }
+  }
+  const Vec3 z_hat = state_.q.conjugate() * state_.h_ref;
+  const Mat3 hm = skew(z_hat);
+  const Mat3 p_att = state_.p.topLeftCorner<3, 3>();  // Suh: the covariance truncated to the attitude block
+  const double r = n.sigma_m * n.sigma_m;
+  const Mat3 s_m = hm * p_att * hm.transpose() + r * Mat3::Identity();
+  // Suh's gain projection: only the rotation about the vertical survives, the bias is untouched.
+  const Mat3 k_att = r3 * r3.transpose() * p_att * hm.transpose() * s_m.inverse();
+  const Vec3 dtheta = k_att * (s.mag - z_hat);
+  state_.q = (state_.q * kalman_support::rotation_from_vector(dtheta)).normalized();
+  // Joseph form with the full covariance, exact for this (suboptimal) gain: I - K H = [G 0; 0 I].
+  const Mat3 g = Mat3::Identity() - k_att * hm;
+  state_.p.topLeftCorner<3, 3>() = g * p_att * g.transpose() + r * k_att * k_att.transpose();
+  state_.p.topRightCorner<3, 3>() = g * state_.p.topRightCorner<3, 3>();
+  state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
+}
+
+UpdateResult MekfFilter::update(const ImuSample& s) {
+  if (!s.finite()) return UpdateResult::kRejected;
+  if (!state_.initialised) return initialise(s);
+  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
+  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
+
+  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+  state_.last_ns = s.timestamp_ns;
+  state_.flags.reinitialised = false;
+  if (adaptive_) adapt(s);
+  const MekfNoise n = noise();
+
+  // Prediction (Nez B.1): bias random walk, quaternion integrator, closed-form Phi and Q_d.
+  const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - state_.bias) : Vec3::Zero();
+  const Vec3 w_prev = state_.have_w_prev ? state_.w_prev : w_now;
+  state_.q = mekf::integrate(state_.q, w_prev, w_now, dt);
+  const Vec3 w_mean = 0.5 * (w_prev + w_now);
+  // P <- Phi P Phi^T + Q_d on 3x3 blocks: Phi = [Theta Psi; 0 I], P = [A B; B^T C].
+  const PredictionBlocks blocks = prediction_blocks(w_mean, dt, n.sigma_g, n.sigma_bg);
+  const Mat3& theta = blocks.theta;
+  const Mat3& psi = blocks.psi;
+  const Mat3 pa = state_.p.topLeftCorner<3, 3>(), pb = state_.p.topRightCorner<3, 3>();
+  const Mat3 m = theta * pb + psi * state_.p.bottomRightCorner<3, 3>();
+  state_.p.topLeftCorner<3, 3>() =
+      (theta * pa + psi * pb.transpose()) * theta.transpose() + m * psi.transpose() + blocks.q11;
+  state_.p.topRightCorner<3, 3>() = m + blocks.q12;
+  state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
+  state_.p.bottomRightCorner<3, 3>().diagonal().array() += blocks.q22;
+
+  // Update step 1: the accelerometer corrects attitude and bias.
+  if (s.has_acc && s.acc.norm() > 1e-6) update_accelerometer(s.acc, n);
+  state_.w_prev = s.has_gyr ? Vec3(s.gyr - state_.bias) : Vec3::Zero();
+  state_.have_w_prev = s.has_gyr;
+
+  // Update step 2: the magnetometer corrects the yaw only.
+  if (s.has_mag) {
+    update_magnetometer(s, n);
+  } else {
+    state_.flags.mag_rejected = false;
+  }
+
+  kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
+  state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
+                                                     params_.rest_acc_m_s2, coeff_.rest_min_ns);
+  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  return UpdateResult::kUpdated;
+}
+
+std::unique_ptr<OrientationFilter> make_mekf_filter(const FilterSpec& spec) {
+  return std::make_unique<MekfFilter>(bind_parameters("mekf", spec, kParams), false);
+}
+
+std::unique_ptr<OrientationFilter> make_mekf_adaptive_filter(const FilterSpec& spec) {
+  return std::make_unique<MekfFilter>(bind_parameters("mekf_adaptive", spec, kParams), true);
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,50 @@
+#include "bsn/fusion/r_adaption.hpp"
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace bsn::fusion {
+namespace {
+
+void require(bool ok, const char* what) {
+  if (!ok) throw std::invalid_argument(std::string("MagneticRAdaption: ") + what);
+}
+
+}  // namespace
+
+MagneticRAdaption::MagneticRAdaption(const Params& params) : params_(params) {
+  require(params.magnitude_exit > 0.0 && params.magnitude_exit <= params.magnitude_enter &&
+              std::isfinite(params.magnitude_enter),
+          "need 0 < magnitude_exit <= magnitude_enter (finite)");
+  require(
+      params.dip_exit_rad > 0.0 && params.dip_exit_rad <= params.dip_enter_rad && std::isfinite(params.dip_enter_rad),
+      "need 0 < dip_exit_rad <= dip_enter_rad (finite)");
+  require(params.min_clean_s >= 0.0 && params.min_clean_s < 1e6, "need 0 <= min_clean_s < 1e6");
+  min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.min_clean_s * 1e9));
+}
+
+double MagneticRAdaption::update(std::uint64_t t_ns, double magnitude_ratio, double dip_deviation_rad) {
+  const double magnitude_dev = std::abs(magnitude_ratio - 1.0);
+  const double dip_dev = std::abs(dip_deviation_rad);
+  const bool finite = std::isfinite(magnitude_dev) && std::isfinite(dip_dev);
+  if (!finite || magnitude_dev > params_.magnitude_enter || dip_dev > params_.dip_enter_rad) {
+    disturbed_ = true;
+    clean_since_valid_ = false;
+  } else if (disturbed_) {
+    const bool clean = magnitude_dev < params_.magnitude_exit && dip_dev < params_.dip_exit_rad;
+    if (!clean) {
+      clean_since_valid_ = false;  // between the thresholds: still disturbed, the clean clock restarts
+    } else if (!clean_since_valid_) {
+      clean_since_valid_ = true;
+      clean_since_ns_ = t_ns;
+    }
+    if (clean_since_valid_ && t_ns >= clean_since_ns_ && t_ns - clean_since_ns_ >= min_clean_ns_) {
+      disturbed_ = false;
+      clean_since_valid_ = false;
+    }
+  }
+  return disturbed_ ? kInfiniteVariance : 1.0;
+}
+
+}  // namespace bsn::fusion

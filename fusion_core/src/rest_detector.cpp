@@ -1,0 +1,36 @@
+#include "bsn/fusion/rest_detector.hpp"
+
+#include <cmath>
+
+#include "bsn/fusion/filter_params.hpp"
+
+namespace bsn::fusion {
+
+RestDetector::RestDetector(const Params& params) : params_(params) {
+  require_positive("rest detector", params.gyr_threshold_rad_s, "rest_gyr_rad_s");
+  require_positive("rest detector", params.acc_threshold_m_s2, "rest_acc_m_s2");
+  require_positive("rest detector", params.min_duration_s, "rest_min_s");
+  min_duration_ns_ = static_cast<std::uint64_t>(std::llround(params.min_duration_s * 1e9));
+  gyr_threshold_sq_ = params.gyr_threshold_rad_s * params.gyr_threshold_rad_s;
+  const double acc_low = kGravity - params.acc_threshold_m_s2;
+  acc_low_sq_ = acc_low < 0.0 ? -1.0 : acc_low * acc_low;  // below zero: every |acc| is above the lower bound
+  const double acc_high = kGravity + params.acc_threshold_m_s2;
+  acc_high_sq_ = acc_high * acc_high;
+}
+
+bool RestDetector::update(const ImuSample& s) {
+  // |gyr| < threshold and | |acc| - g | < threshold, compared squared (no square roots per sample).
+  const double acc_sq = s.acc.squaredNorm();
+  const bool still_now = s.has_gyr && s.has_acc && s.gyr.squaredNorm() < gyr_threshold_sq_ && acc_sq > acc_low_sq_ &&
+                         acc_sq < acc_high_sq_;
+  if (!still_now) {
+    state_.still = false;
+  } else if (!state_.still || s.timestamp_ns < state_.still_since_ns) {
+    state_.still = true;
+    state_.still_since_ns = s.timestamp_ns;
+  }
+  state_.resting = state_.still && s.timestamp_ns - state_.still_since_ns >= min_duration_ns_;
+  return state_.resting;
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,249 @@
+#include "bsn/fusion/seel_ruppin_filter.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+#include "bsn/fusion/filter_params.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+constexpr const char* kName = "seel_ruppin";
+
+using P = SeelRuppinFilter::Params;
+constexpr ParamField<P> kParams[] = {
+    {"tau_acc_s", &P::tau_acc_s},
+    {"tau_mag_s", &P::tau_mag_s},
+    {"zeta", &P::zeta},
+    {"max_acc_error_rad", &P::max_acc_error_rad},
+    {"rest_bias_lowpass", &P::rest_bias_lowpass},
+    {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
+    {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
+    {"bias_min_static_s", &P::bias_min_static_s},
+    {"max_gyro_bias_rad_s", &P::max_gyro_bias_rad_s},
+    {"max_gap_s", &P::max_gap_s},
+    {"mag_rejection", &P::mag_rejection},
+    {"mag_norm_enter", &P::mag_norm_enter},
+    {"mag_norm_leave", &P::mag_norm_leave},
+    {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
+    {"mag_dip_leave_rad", &P::mag_dip_leave_rad},
+    {"mag_min_clean_s", &P::mag_min_clean_s},
+    {"rest_gyr_rad_s", &P::rest_gyr_rad_s},
+    {"rest_acc_m_s2", &P::rest_acc_m_s2},
+    {"rest_min_s", &P::rest_min_s},
+    {"init_period_s", &P::init_period_s},
+};
+
+std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
+
+RestDetector::Params rest_params(const P& p) { return {p.rest_gyr_rad_s, p.rest_acc_m_s2, p.rest_min_s}; }
+
+MagDisturbanceDetector::Params mag_params(const P& p) {
+  return {p.mag_norm_enter, p.mag_norm_leave, p.mag_dip_enter_rad, p.mag_dip_leave_rad, p.mag_min_clean_s};
+}
+
+const P& checked(const P& p) {
+  require_positive(kName, p.tau_acc_s, "tau_acc_s");
+  require_positive(kName, p.tau_mag_s, "tau_mag_s");
+  require_non_negative(kName, p.zeta, "zeta");
+  require_positive(kName, p.max_gyro_bias_rad_s, "max_gyro_bias_rad_s");
+  require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
+  require_positive(kName, p.max_gap_s, "max_gap_s");
+  require_positive(kName, p.init_period_s, "init_period_s");
+  for (const auto& [value, name] :
+       {std::pair{p.mag_rejection, "mag_rejection"}, std::pair{p.rest_bias_lowpass, "rest_bias_lowpass"}}) {
+    if (value != 0.0 && value != 1.0) {
+      throw std::invalid_argument(std::string(kName) + ": parameter " + name + " must be 0 or 1, got " +
+                                  std::to_string(value));
+    }
+  }
+  return p;
+}
+
+// exp_rotation_vector(v) without trig for the angles of one sample step (|v| < 0.2 rad): cos(h) and sin(h) / h,
+// h = |v| / 2, as Taylor series in h^2 (truncation below 1e-20). Larger angles take the exact trig path.
+Quat exp_rotation_vector_fast(const Vec3& v) {
+  const double h2 = 0.25 * v.squaredNorm();
+  if (!(h2 < 1e-2)) return exp_rotation_vector(v);
+  const double c =
+      1.0 - h2 * (1.0 / 2) *
+                (1.0 - h2 * (1.0 / 12) * (1.0 - h2 * (1.0 / 30) * (1.0 - h2 * (1.0 / 56) * (1.0 - h2 * (1.0 / 90)))));
+  const double s =
+      0.5 * (1.0 - h2 * (1.0 / 6) *
+                       (1.0 - h2 * (1.0 / 20) *
+                                  (1.0 - h2 * (1.0 / 42) * (1.0 - h2 * (1.0 / 72) * (1.0 - h2 * (1.0 / 110))))));
+  return Quat(c, s * v.x(), s * v.y(), s * v.z());
+}
+
+// Earth axes in sensor coordinates, q* (x) e (x) q for a unit q: the rows of R(q).
+Vec3 up_in_sensor(const Quat& q) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  return Vec3(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y));
+}
+
+Vec3 north_in_sensor(const Quat& q) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  return Vec3(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x));
+}
+
+// atan2(y, x), by its series for the small angles (|y| < 0.01 x) of a correction step (truncation below 1e-22).
+double atan2_fast(double y, double x) {
+  if (x > 0.0 && std::abs(y) < 0.01 * x) {
+    const double t = y / x, t2 = t * t;
+    return t * (1.0 - t2 * (1.0 / 3 - t2 * (1.0 / 5 - t2 * (1.0 / 7 - t2 * (1.0 / 9)))));
+  }
+  return std::atan2(y, x);
+}
+
+// Signed angle from v to w about the unit axis n (v and w perpendicular to n, not necessarily unit).
+double signed_angle(const Vec3& v, const Vec3& w, const Vec3& n) { return atan2_fast(v.cross(w).dot(n), v.dot(w)); }
+
+}  // namespace
+
+SeelRuppinFilter::SeelRuppinFilter(const Params& params)
+    : params_(checked(params)),
+      rest_(rest_params(params)),
+      mag_detector_(mag_params(params)),
+      rest_bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}) {
+  coeff_.tau_acc_14 = 1.4 * params.tau_acc_s;
+  coeff_.tau_mag_14 = 1.4 * params.tau_mag_s;
+  coeff_.bias_factor_acc = params.zeta * params.zeta / (160.0 * params.tau_acc_s);
+  coeff_.bias_factor_mag = params.zeta * params.zeta / (160.0 * params.tau_mag_s);
+  coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
+  coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
+  coeff_.acc_clip_test = params.max_acc_error_rad < std::numbers::pi;
+  coeff_.sin_max_acc_error = std::sin(params.max_acc_error_rad);
+  coeff_.cos_max_acc_error = std::cos(params.max_acc_error_rad);
+}
+
+double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
+  if (dt != cached_dt) {
+    cached_dt = dt;
+    k = dt / (tau_14 + dt);
+  }
+  return k;
+}
+
+void SeelRuppinFilter::reset() {
+  state_ = State{};
+  rest_.reset();
+  mag_detector_.reset();
+  rest_bias_.reset();
+}
+
+UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
+  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
+  const bool mag_usable =
+      s.has_mag && s.mag.norm() > 1e-9 && s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
+  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  state_.initialised = true;
+  state_.heading_known = mag_usable;
+  state_.last_ns = s.timestamp_ns;
+  state_.last_mag_ns = mag_usable ? s.timestamp_ns : 0;
+  state_.init_ns = s.timestamp_ns;
+  state_.flags = FilterFlags{};
+  state_.flags.initialising = true;
+  state_.flags.reinitialised = true;
+  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  rest_.reset();
+  mag_detector_.reset();
+  if (mag_usable) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());
+  state_.flags.resting = rest_.update(s);
+  return UpdateResult::kInitialised;
+}
+
+// Eqs. 7-10 and the accelerometer part of eq. 13.
+void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
+  const Vec3 a = acc.normalized();
+  const Vec3 r_acc = up_in_sensor(state_.q);  // eq. 7: earth vertical in sensor coordinates
+  const Vec3 cross = a.cross(r_acc);
+  const double sin_err = cross.norm();
+  const double cos_err = a.dot(r_acc);
+  // alpha = min(atan2(sin, cos), max) (robust form of the paper's arccos). A clipped error needs no atan2: for
+  // max < pi, alpha >= max exactly when sin(alpha - max) >= 0.
+  const double alpha =
+      coeff_.acc_clip_test && sin_err * coeff_.cos_max_acc_error - cos_err * coeff_.sin_max_acc_error >= 0.0
+          ? params_.max_acc_error_rad
+          : std::min(atan2_fast(sin_err, cos_err), params_.max_acc_error_rad);
+  if (alpha < 1e-15) return;
+  // At 180 deg the axis is undefined; any axis perpendicular to a is a shortest correction.
+  const Vec3 axis = sin_err > 1e-12 ? Vec3(cross / sin_err) : Vec3(a.unitOrthogonal());
+  const double k = acc_gain_.gain(dt, coeff_.tau_acc_14);
+  state_.q = (state_.q * exp_rotation_vector_fast(k * alpha * axis)).normalized();  // eq. 10
+  state_.gyro_bias -= coeff_.bias_factor_acc * k * alpha * axis;                    // eq. 13 (b = -gyro_bias)
+}
+
+// Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
+// magnetometer turns the heading only.
+void SeelRuppinFilter::correct_mag(const ImuSample& s) {
+  const Vec3 r_acc = up_in_sensor(state_.q);
+  if (params_.mag_rejection != 0.0 && mag_detector_.update(s.timestamp_ns, s.mag, r_acc)) {
+    state_.flags.mag_rejected = true;
+    return;
+  }
+  const Vec3 m_horizontal = s.mag - s.mag.dot(r_acc) * r_acc;  // eq. 11
+  if (!(m_horizontal.squaredNorm() > 1e-6 * s.mag.squaredNorm())) {
+    state_.flags.mag_rejected = true;  // field (nearly) vertical: no heading information
+    return;
+  }
+  const Vec3 r_mag = north_in_sensor(state_.q);  // ENU: magnetic north is earth y
+  const double alpha = signed_angle(m_horizontal, r_mag, r_acc);
+  // The gain uses the time since the last used magnetometer reading, so tau_mag holds in seconds even when the
+  // magnetometer is slower than the IMU.
+  const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
+  const double dt_mag = (state_.last_mag_ns != 0 && since_mag <= coeff_.max_gap_ns)
+                            ? static_cast<double>(since_mag) * 1e-9
+                            : static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+  const double k = state_.heading_known ? mag_gain_.gain(dt_mag, coeff_.tau_mag_14) : 1.0;
+  state_.q = (state_.q * exp_rotation_vector_fast(k * alpha * r_acc)).normalized();  // eq. 12
+  if (state_.heading_known) state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
+  state_.heading_known = true;
+  state_.last_mag_ns = s.timestamp_ns;
+}
+
+UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
+  if (!s.finite()) return UpdateResult::kRejected;
+  if (!state_.initialised) return initialise(s);
+  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
+  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) {
+    const Vec3 bias = state_.gyro_bias;
+    const UpdateResult r = initialise(s);
+    state_.gyro_bias = bias;
+    return r;
+  }
+
+  const State before = state_;
+  const MagDisturbanceDetector detector_before = mag_detector_;
+  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+  state_.flags.reinitialised = false;
+  state_.flags.mag_rejected = false;
+
+  // Strapdown prediction with the bias-corrected rate (eq. 14), exact for a rate constant over the step.
+  if (s.has_gyr) state_.q = (state_.q * exp_rotation_vector_fast((s.gyr - state_.gyro_bias) * dt)).normalized();
+  if (s.has_acc && s.acc.squaredNorm() > 1e-12) correct_acc(s.acc, dt);
+  if (s.has_mag) correct_mag(s);
+  const double max_bias = params_.max_gyro_bias_rad_s;
+  state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);
+
+  if (!state_.q.coeffs().allFinite() || !state_.gyro_bias.allFinite()) {
+    state_ = before;  // extreme but finite input (e.g. 1e300 rad/s) must not leave NaN behind
+    mag_detector_ = detector_before;
+    return UpdateResult::kRejected;
+  }
+  if (params_.rest_bias_lowpass != 0.0 && s.has_gyr) {
+    rest_bias_.set_bias(state_.gyro_bias);
+    rest_bias_.update(s.timestamp_ns, dt, s.gyr);
+    if (rest_bias_.updating()) state_.gyro_bias = rest_bias_.bias().cwiseMax(-max_bias).cwiseMin(max_bias);
+  }
+  state_.last_ns = s.timestamp_ns;
+  state_.flags.resting = rest_.update(s);
+  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  return UpdateResult::kUpdated;
+}
+
+std::unique_ptr<OrientationFilter> make_seel_ruppin_filter(const FilterSpec& spec) {
+  return std::make_unique<SeelRuppinFilter>(bind_parameters(kName, spec, kParams));
+}
+
+}  // namespace bsn::fusion

@@ -1,0 +1,286 @@
+#include "calibrate_command.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "bsn/calib/allan.hpp"
+#include "bsn/calib/pose_segmentation.hpp"
+#include "bsn/dds/calibration_file.hpp"
+#include "bsn/fusion/rotation.hpp"
+#include "bsn/io/recording.hpp"
+
+namespace bsn::services {
+namespace {
+
+using calib::FieldCalibration;
+using calib::Points3;
+
+std::string number(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[40];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+std::string json_vector(const calib::Vec3& v) {
+  return "[" + number(v.x()) + ", " + number(v.y()) + ", " + number(v.z()) + "]";
+}
+
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  for (const char c : s) {
+    if (c == '"' || c == '\\') out += '\\';
+    if (static_cast<unsigned char>(c) < 0x20) continue;
+    out += c;
+  }
+  return out + "\"";
+}
+
+std::string json_quality(const calib::FitQuality& q) {
+  std::string warnings;
+  for (const auto& w : q.warnings) warnings += (warnings.empty() ? "" : ", ") + json_string(w);
+  return "{\"pose_count\": " + std::to_string(q.pose_count) + ", \"sample_count\": " + std::to_string(q.sample_count) +
+         ", \"residual_rms\": " + number(q.residual_rms) + ", \"residual_max\": " + number(q.residual_max) +
+         ", \"pose_residual_rms\": " + number(q.pose_residual_rms) +
+         ", \"sphere_coverage\": " + number(q.sphere_coverage) +
+         ", \"octants_covered\": " + std::to_string(q.octants_covered) +
+         ", \"ellipsoid_condition\": " + number(q.ellipsoid_condition) +
+         ", \"transform_condition\": " + number(q.transform_condition) +
+         ", \"ellipsoid_consistency\": " + number(q.ellipsoid_consistency) + ", \"warnings\": [" + warnings + "]}";
+}
+
+std::string json_calibration(const FieldCalibration& c) {
+  const calib::Mat3& h = c.calibration.transform;
+  std::string rows;
+  for (int r = 0; r < 3; ++r) rows += (r ? ", " : "") + json_vector(h.row(r).transpose());
+  return "{\"bias\": " + json_vector(c.calibration.bias) + ", \"transform\": [" + rows +
+         "], \"field_magnitude\": " + number(c.field_magnitude) + ", \"field_vector\": " + json_vector(c.field_vector) +
+         ", \"quality\": " + json_quality(c.quality) + "}";
+}
+
+void print_report(const char* channel, const FieldCalibration& c) {
+  const calib::Mat3& h = c.calibration.transform;
+  const calib::FitQuality& q = c.quality;
+  std::printf("%s: u = H (raw - B), |u| = %g\n", channel, c.field_magnitude);
+  std::printf("  B  = [%.6g, %.6g, %.6g]\n", c.calibration.bias.x(), c.calibration.bias.y(), c.calibration.bias.z());
+  for (int r = 0; r < 3; ++r)
+    std::printf("  %s [%.6g, %.6g, %.6g]\n", r == 0 ? "H =" : "   ", h(r, 0), h(r, 1), h(r, 2));
+  std::printf("  field vector at pose 0: [%.6g, %.6g, %.6g]\n", c.field_vector.x(), c.field_vector.y(),
+              c.field_vector.z());
+  std::printf("  quality: %zu poses, %zu samples; | |u| - M | rms %.3g (%.2f %%), max %.3g; pose residual rms %.3g\n",
+              q.pose_count, q.sample_count, q.residual_rms, 100.0 * q.residual_rms / c.field_magnitude, q.residual_max,
+              q.pose_residual_rms);
+  std::printf(
+      "           sphere coverage %.2f of 1, %d of 8 octants; condition: ellipsoid %.3g, H %.3g; "
+      "H^T H vs M^2 Sigma %.2f %%\n",
+      q.sphere_coverage, q.octants_covered, q.ellipsoid_condition, q.transform_condition,
+      100.0 * q.ellipsoid_consistency);
+  for (const auto& w : q.warnings) std::printf("  warning: %s\n", w.c_str());
+}
+
+Points3 columns(const io::RowsX3& rows) { return rows.transpose(); }
+
+std::string default_output(const std::string& input) {
+  std::filesystem::path p(input);
+  p.replace_extension(".calib.yaml");
+  return p.string();
+}
+
+int run_fit(const CalibrateOptions& opt) {
+  io::Recording rec;
+  try {
+    rec = io::read_recording(opt.input);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bsn calibrate: %s\n", e.what());
+    return 2;
+  }
+  if (!(opt.field_magnitude > 0.0) || !std::isfinite(opt.field_magnitude)) {
+    std::fprintf(stderr, "bsn calibrate: --field-magnitude must be positive\n");
+    return 2;
+  }
+  calib::PoseSegmentationParams params;
+  params.rest_rate_rad_s = opt.rest_rate_rad_s;
+  params.min_pose_s = opt.min_pose_s;
+  const Points3 rates = columns(rec.gyr);
+  calib::PoseSegmentation poses;
+  const FieldCalibration mag = calib::calibrate_field_from_recording(rates, columns(rec.mag), rec.sampling_rate_hz,
+                                                                     opt.field_magnitude, params, &poses);
+  if (!mag.ok()) {
+    std::fprintf(stderr, "bsn calibrate: %s: magnetometer: %s\n", opt.input.c_str(), mag.message.c_str());
+    return 1;
+  }
+  FieldCalibration acc;
+  if (opt.accelerometer) {
+    acc =
+        calib::calibrate_field_from_recording(rates, columns(rec.acc), rec.sampling_rate_hz, fusion::kGravity, params);
+    if (!acc.ok()) {
+      std::fprintf(stderr, "bsn calibrate: %s: accelerometer: %s\n", opt.input.c_str(), acc.message.c_str());
+      return 1;
+    }
+  }
+  calib::ChannelCalibration gyro;
+  gyro.bias = poses.gyro_bias;
+
+  const std::string out_path = opt.output.empty() ? default_output(opt.input) : opt.output;
+  {
+    std::ofstream out(out_path);
+    out << "# bsn calibration of " << std::filesystem::path(opt.input).filename().string()
+        << " (bsn calibrate): u = transform * (raw - bias)\n"
+        << dds::calibration_to_yaml(opt.node, &mag, opt.accelerometer ? &acc : nullptr,
+                                    opt.gyro_bias ? &gyro : nullptr);
+    if (!out) {
+      std::fprintf(stderr, "bsn calibrate: cannot write %s\n", out_path.c_str());
+      return 2;
+    }
+  }
+  if (opt.json) {
+    std::printf("%s\n", json_calibration(mag).c_str());
+  } else {
+    print_report("magnetometer", mag);
+    if (opt.accelerometer) print_report("accelerometer", acc);
+    std::printf("gyro bias from %zu rest samples: [%.6g, %.6g, %.6g] rad/s\n", poses.rest_samples, poses.gyro_bias.x(),
+                poses.gyro_bias.y(), poses.gyro_bias.z());
+    std::printf("wrote %s\n", out_path.c_str());
+  }
+  return 0;
+}
+
+// ---- Allan ----
+
+struct AxisCurve {
+  std::string name;
+  std::vector<calib::AllanPoint> curve;
+  calib::NoiseCoefficients coefficients{0, 0, 0};
+};
+
+std::string svg_plot(const std::vector<AxisCurve>& curves) {
+  const double w = 720, h = 480, left = 70, right = 20, top = 20, bottom = 50;
+  double tmin = INFINITY, tmax = 0, amin = INFINITY, amax = 0;
+  for (const auto& c : curves)
+    for (const auto& p : c.curve)
+      if (p.adev > 0) {
+        tmin = std::min(tmin, p.tau_s), tmax = std::max(tmax, p.tau_s);
+        amin = std::min(amin, p.adev), amax = std::max(amax, p.adev);
+      }
+  const double lt0 = std::floor(std::log10(tmin)), lt1 = std::ceil(std::log10(tmax));
+  const double la0 = std::floor(std::log10(amin)), la1 = std::ceil(std::log10(amax));
+  auto x = [&](double t) { return left + (std::log10(t) - lt0) / std::max(1.0, lt1 - lt0) * (w - left - right); };
+  auto y = [&](double a) { return top + (la1 - std::log10(a)) / std::max(1.0, la1 - la0) * (h - top - bottom); };
+  std::string s =
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"720\" height=\"480\" font-family=\"sans-serif\" "
+      "font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
+  char buf[256];
+  for (double e = lt0; e <= lt1; ++e) {
+    std::snprintf(buf, sizeof buf,
+                  "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#ddd\"/><text x=\"%.1f\" y=\"%.1f\" "
+                  "text-anchor=\"middle\">1e%g</text>\n",
+                  x(std::pow(10, e)), top, x(std::pow(10, e)), h - bottom, x(std::pow(10, e)), h - bottom + 16, e);
+    s += buf;
+  }
+  for (double e = la0; e <= la1; ++e) {
+    std::snprintf(buf, sizeof buf,
+                  "<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"#ddd\"/><text x=\"%.1f\" y=\"%.1f\" "
+                  "text-anchor=\"end\">1e%g</text>\n",
+                  left, y(std::pow(10, e)), w - right, y(std::pow(10, e)), left - 4, y(std::pow(10, e)) + 4, e);
+    s += buf;
+  }
+  s += "<text x=\"390\" y=\"470\" text-anchor=\"middle\">tau (s)</text>\n";
+  s += "<text x=\"14\" y=\"240\" transform=\"rotate(-90 14 240)\" text-anchor=\"middle\">Allan deviation</text>\n";
+  const char* colours[] = {"#d62728", "#2ca02c", "#1f77b4", "#ff7f0e", "#9467bd",
+                           "#8c564b", "#e377c2", "#7f7f7f", "#17becf"};
+  for (std::size_t i = 0; i < curves.size(); ++i) {
+    std::string points;
+    for (const auto& p : curves[i].curve)
+      if (p.adev > 0) {
+        std::snprintf(buf, sizeof buf, "%.1f,%.1f ", x(p.tau_s), y(p.adev));
+        points += buf;
+      }
+    s += "<polyline fill=\"none\" stroke-width=\"1.5\" stroke=\"" + std::string(colours[i % 9]) + "\" points=\"" +
+         points + "\"/>\n";
+    std::snprintf(buf, sizeof buf, "<text x=\"%.1f\" y=\"%.1f\" fill=\"%s\">%s</text>\n", w - right - 60,
+                  top + 14.0 * static_cast<double>(i + 1), colours[i % 9], curves[i].name.c_str());
+    s += buf;
+  }
+  return s + "</svg>\n";
+}
+
+int run_allan(const CalibrateOptions& opt) {
+  io::Recording rec;
+  try {
+    rec = io::read_recording(opt.allan);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bsn calibrate: %s\n", e.what());
+    return 2;
+  }
+  struct Channel {
+    const char* name;
+    const io::RowsX3* data;
+    const char* unit;
+  };
+  const Channel channels[] = {{"gyr", &rec.gyr, "rad/s"}, {"acc", &rec.acc, "m/s^2"}, {"mag", &rec.mag, "uT"}};
+  std::vector<AxisCurve> curves;
+  const double fs = rec.sampling_rate_hz;
+  std::printf("Allan deviation of %s (%zu samples at %g Hz, %.0f s)\n", opt.allan.c_str(), rec.size(), fs,
+              static_cast<double>(rec.size()) / fs);
+  std::printf("%-6s %-8s %14s %14s %14s | %14s\n", "axis", "unit", "N (/sqrt(Hz))", "B", "K (/s/sqrt(Hz))",
+              "sigma/sample");
+  for (const Channel& c : channels) {
+    if (c.data->rows() < 3 || !c.data->allFinite()) {
+      std::printf("%-6s skipped (missing or non-finite samples)\n", c.name);
+      continue;
+    }
+    for (int axis = 0; axis < 3; ++axis) {
+      AxisCurve a;
+      a.name = std::string(c.name) + "_" + "xyz"[axis];
+      const Eigen::VectorXd x = c.data->col(axis);
+      a.curve = calib::allan_deviation(x, fs);
+      a.coefficients = calib::fit_noise_coefficients(a.curve);
+      const calib::FilterNoise f = calib::filter_noise(a.coefficients, fs);
+      std::printf("%-6s %-8s %14.4g %14.4g %14.4g | %14.4g\n", a.name.c_str(), c.unit, a.coefficients.white_density,
+                  a.coefficients.bias_instability, a.coefficients.rate_random_walk, f.sigma_white);
+      curves.push_back(std::move(a));
+    }
+  }
+  if (curves.empty()) {
+    std::fprintf(stderr, "bsn calibrate: %s: no channel to analyse\n", opt.allan.c_str());
+    return 1;
+  }
+  // The Kalman filters' sigmas (nez-2018 Table 2): the worst axis of each sensor.
+  auto worst = [&](const char* prefix, auto field) {
+    double v = 0.0;
+    for (const auto& a : curves)
+      if (a.name.rfind(prefix, 0) == 0) v = std::max(v, field(a));
+    return v;
+  };
+  const auto white = [&](const AxisCurve& a) { return calib::filter_noise(a.coefficients, fs).sigma_white; };
+  const auto bias = [&](const AxisCurve& a) { return a.coefficients.bias_instability; };
+  std::printf("for the Kalman filters: sigma_g %.3g rad/s, sigma_bg %.3g rad/s, sigma_a %.3g m/s^2, sigma_m %.3g uT\n",
+              worst("gyr", white), worst("gyr", bias), worst("acc", white), worst("mag", white));
+  if (!opt.plot.empty()) {
+    std::ofstream out(opt.plot);
+    out << svg_plot(curves);
+    if (!out) {
+      std::fprintf(stderr, "bsn calibrate: cannot write %s\n", opt.plot.c_str());
+      return 2;
+    }
+    std::printf("wrote %s\n", opt.plot.c_str());
+  }
+  return 0;
+}
+
+}  // namespace
+
+int run_calibrate(const CalibrateOptions& options) {
+  if (options.input.empty() == options.allan.empty()) {
+    std::fprintf(stderr, "bsn calibrate: give exactly one of --input FILE or --allan FILE\n");
+    return 2;
+  }
+  return options.allan.empty() ? run_fit(options) : run_allan(options);
+}
+
+}  // namespace bsn::services

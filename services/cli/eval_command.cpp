@@ -1,0 +1,139 @@
+#include "eval_command.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "bsn/eval/evaluation.hpp"
+#include "bsn/io/recording.hpp"
+
+namespace bsn::services {
+namespace {
+
+namespace fs = std::filesystem;
+
+bool is_recording(const fs::path& p) {
+  return p.extension() == ".hdf5" || p.extension() == ".h5" || p.extension() == ".csv";
+}
+
+// Files named on the command line, and the recordings inside folders named there (sorted).
+std::vector<fs::path> expand_inputs(const std::vector<std::string>& inputs) {
+  std::vector<fs::path> files;
+  for (const auto& in : inputs) {
+    const fs::path p(in);
+    if (fs::is_directory(p)) {
+      std::vector<fs::path> inside;
+      for (const auto& e : fs::directory_iterator(p)) {
+        if (e.is_regular_file() && is_recording(e.path())) inside.push_back(e.path());
+      }
+      std::sort(inside.begin(), inside.end());
+      if (inside.empty()) throw std::runtime_error(in + ": no .hdf5 or .csv recordings in this folder");
+      files.insert(files.end(), inside.begin(), inside.end());
+    } else if (fs::exists(p)) {
+      files.push_back(p);
+    } else {
+      throw std::runtime_error(in + ": no such file or folder");
+    }
+  }
+  return files;
+}
+
+// A one-line progress bar on stderr, only when stderr is a terminal.
+class ProgressBar {
+ public:
+  explicit ProgressBar(std::size_t total) : total_(total), enabled_(isatty(STDERR_FILENO) != 0) {}
+  void show(std::size_t done, const std::string& what) const {
+    if (!enabled_) return;
+    constexpr int kWidth = 30;
+    const int filled = static_cast<int>(kWidth * done / std::max<std::size_t>(1, total_));
+    std::fprintf(stderr, "\r[%.*s%*s] %zu/%zu %-50.50s", filled, "##############################", kWidth - filled, "",
+                 done, total_, what.c_str());
+    std::fflush(stderr);
+  }
+  void finish() const {
+    if (enabled_) std::fprintf(stderr, "\r%*s\r", 100, "");
+  }
+
+ private:
+  std::size_t total_;
+  bool enabled_;
+};
+
+}  // namespace
+
+int run_eval(const EvalOptions& opt) {
+  std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
+  try {
+    std::vector<std::string> args = opt.filters;
+    if (args.empty()) args.push_back("all");
+    for (const auto& a : args) {
+      if (a == "all") {
+        for (const auto& n : fusion::filter_names()) filters.emplace_back(n, fusion::FilterSpec{n, {}});
+      } else {
+        fusion::FilterSpec spec = eval::parse_filter_argument(a);
+        (void)fusion::make_filter(spec);  // unknown names and parameters fail here, before any work
+        filters.emplace_back(a, spec);
+      }
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  }
+
+  std::vector<fs::path> files;
+  try {
+    files = expand_inputs(opt.inputs);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  }
+
+  std::vector<eval::TrialResult> results;
+  ProgressBar bar(files.size() * filters.size());
+  std::size_t done = 0;
+  int exit_code = 0;
+  for (const auto& file : files) {
+    io::Recording rec;
+    try {
+      rec = io::read_recording(file.string());
+    } catch (const io::IoError& e) {
+      bar.finish();
+      std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+      exit_code = 1;
+      done += filters.size();
+      continue;
+    }
+    if (rec.opt_quat.rows() == 0) {
+      std::fprintf(stderr, "bsn eval: warning: %s has no reference orientation; nothing is scored\n",
+                   file.string().c_str());
+    }
+    for (const auto& [label, spec] : filters) {
+      bar.show(done, file.stem().string() + " / " + label);
+      results.push_back(eval::run_trial(rec, file.stem().string(), spec, label));
+      if (results.back().non_finite > 0) {
+        std::fprintf(stderr, "bsn eval: error: %s gave %zu non-finite orientations on %s\n", label.c_str(),
+                     results.back().non_finite, file.string().c_str());
+        exit_code = 1;
+      }
+      ++done;
+    }
+  }
+  bar.finish();
+
+  std::fputs(opt.json ? eval::to_json(results).c_str() : eval::to_table(results).c_str(), stdout);
+  if (!opt.plot_path.empty()) {
+    std::ofstream out(opt.plot_path);
+    out << eval::to_svg(results);
+    if (!out) {
+      std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
+      return 1;
+    }
+    if (!opt.json) std::printf("plot: %s\n", opt.plot_path.c_str());
+  }
+  return exit_code;
+}
+
+}  // namespace bsn::services

@@ -1,0 +1,44 @@
+// Calibration files: the YAML that `bsn calibrate` writes and `bsn fusion` loads per node (body-model key
+// `calibration: FILE`). Format (every channel optional; u = transform * (raw - bias)):
+//
+//   node: thigh_l                    # optional, informational
+//   magnetometer:
+//     bias: [bx, by, bz]             # raw unit
+//     transform: [[h11, h12, h13], [h21, h22, h23], [h31, h32, h33]]
+//     field_magnitude: 1.0           # informational: |u| after calibration
+//     field_vector: [ux, uy, uz]     # informational: the field at the reference pose
+//   accelerometer: {bias: [...], transform: [[...], [...], [...]]}
+//   gyroscope: {bias: [...], transform: [[...], [...], [...]]}
+//   quality: {...}                   # informational, not read back
+#pragma once
+
+#include <string>
+#include <unordered_map>
+
+#include "bsn/calib/field_calibration.hpp"
+#include "bsn/calib/sensor_calibration.hpp"
+#include "bsn/dds/body_config.hpp"
+
+namespace bsn::dds {
+
+/// Parses calibration YAML; `source` names it in messages. Throws ConfigError("SOURCE:LINE: problem") on a
+/// syntax error, unknown key, wrong size, non-finite number or singular transform.
+calib::SensorCalibration parse_calibration(const std::string& yaml_text, const std::string& source);
+
+/// Reads a calibration file. Throws ConfigError.
+calib::SensorCalibration load_calibration_file(const std::string& path);
+
+/// A calibration file's text. `magnetometer` (with its quality report) and `accelerometer` are written when
+/// ok(); `gyroscope` when given.
+std::string calibration_to_yaml(const std::string& node, const calib::FieldCalibration* magnetometer,
+                                const calib::FieldCalibration* accelerometer,
+                                const calib::ChannelCalibration* gyroscope);
+
+/// The calibrations named by the segments of a body model file (`calibration: FILE`, relative to the body
+/// file), by node id. Empty for "" (the default body). Throws ConfigError.
+std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations(const std::string& body_path);
+
+/// `path` relative to the directory of `relative_to` (a file), unless it is absolute.
+std::string resolve_relative(const std::string& path, const std::string& relative_to);
+
+}  // namespace bsn::dds

@@ -1,0 +1,175 @@
+#include "bsn/dds/calibration_file.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <Eigen/LU>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace bsn::dds {
+namespace {
+
+[[noreturn]] void fail(const std::string& source, const YAML::Node& at, const std::string& what) {
+  throw ConfigError(source + ":" + std::to_string(at.Mark().line + 1) + ": " + what);
+}
+
+double number(const std::string& source, const YAML::Node& n, const std::string& what) {
+  double v = 0.0;
+  try {
+    if (!n.IsScalar()) fail(source, n, what + " must be a number");
+    v = n.as<double>();
+  } catch (const YAML::Exception&) {
+    fail(source, n, what + " must be a number");
+  }
+  if (!std::isfinite(v)) fail(source, n, what + " must be finite");
+  return v;
+}
+
+calib::Vec3 vector3(const std::string& source, const YAML::Node& n, const std::string& what) {
+  if (!n.IsSequence() || n.size() != 3) fail(source, n, what + " must be a list of 3 numbers");
+  return {number(source, n[0], what), number(source, n[1], what), number(source, n[2], what)};
+}
+
+calib::ChannelCalibration channel(const std::string& source, const YAML::Node& n, const std::string& name) {
+  if (!n.IsMap()) fail(source, n, name + " must be a mapping with bias and transform");
+  for (const auto& kv : n) {
+    const std::string key = kv.first.as<std::string>();
+    if (key != "bias" && key != "transform" && key != "field_magnitude" && key != "field_vector")
+      fail(source, kv.first,
+           "unknown key '" + key + "' in " + name + " (known keys: bias, transform, field_magnitude, field_vector)");
+  }
+  calib::ChannelCalibration c;
+  if (n["bias"]) c.bias = vector3(source, n["bias"], name + " bias");
+  if (const YAML::Node t = n["transform"]) {
+    if (!t.IsSequence() || t.size() != 3) fail(source, t, name + " transform must be a list of 3 rows of 3 numbers");
+    for (std::size_t r = 0; r < 3; ++r)
+      c.transform.row(static_cast<Eigen::Index>(r)) = vector3(source, t[r], name + " transform row").transpose();
+    if (!(std::abs(c.transform.determinant()) > 1e-12 * std::pow(c.transform.norm(), 3)))
+      fail(source, t, name + " transform is singular");
+  }
+  return c;
+}
+
+}  // namespace
+
+calib::SensorCalibration parse_calibration(const std::string& yaml_text, const std::string& source) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(yaml_text);
+  } catch (const YAML::ParserException& e) {
+    throw ConfigError(source + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg);
+  }
+  if (!root || root.IsNull()) throw ConfigError(source + ":1: the calibration file is empty");
+  if (!root.IsMap()) fail(source, root, "a calibration file must be a mapping");
+  calib::SensorCalibration out;
+  try {
+    for (const auto& kv : root) {
+      const std::string key = kv.first.as<std::string>();
+      if (key == "magnetometer") {
+        out.magnetometer = channel(source, kv.second, key);
+      } else if (key == "accelerometer") {
+        out.accelerometer = channel(source, kv.second, key);
+      } else if (key == "gyroscope") {
+        out.gyroscope = channel(source, kv.second, key);
+      } else if (key != "node" && key != "quality") {
+        fail(source, kv.first,
+             "unknown key '" + key + "' (known keys: node, magnetometer, accelerometer, gyroscope, quality)");
+      }
+    }
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(source + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
+  }
+  if (out.empty()) fail(source, root, "the calibration file holds no magnetometer, accelerometer or gyroscope");
+  return out;
+}
+
+calib::SensorCalibration load_calibration_file(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw ConfigError(path + ": cannot open the calibration file");
+  std::stringstream text;
+  text << in.rdbuf();
+  return parse_calibration(text.str(), path);
+}
+
+namespace {
+
+void emit_vector(YAML::Emitter& out, const calib::Vec3& v) {
+  out << YAML::Flow << YAML::BeginSeq << v.x() << v.y() << v.z() << YAML::EndSeq;
+}
+
+void emit_channel(YAML::Emitter& out, const calib::ChannelCalibration& c) {
+  out << YAML::Key << "bias" << YAML::Value;
+  emit_vector(out, c.bias);
+  out << YAML::Key << "transform" << YAML::Value << YAML::Flow << YAML::BeginSeq;
+  for (int r = 0; r < 3; ++r) emit_vector(out, c.transform.row(r).transpose());
+  out << YAML::EndSeq;
+}
+
+void emit_field(YAML::Emitter& out, const std::string& name, const calib::FieldCalibration& f) {
+  out << YAML::Key << name << YAML::Value << YAML::BeginMap;
+  emit_channel(out, f.calibration);
+  out << YAML::Key << "field_magnitude" << YAML::Value << f.field_magnitude;
+  out << YAML::Key << "field_vector" << YAML::Value;
+  emit_vector(out, f.field_vector);
+  out << YAML::EndMap;
+}
+
+}  // namespace
+
+std::string calibration_to_yaml(const std::string& node, const calib::FieldCalibration* magnetometer,
+                                const calib::FieldCalibration* accelerometer,
+                                const calib::ChannelCalibration* gyroscope) {
+  YAML::Emitter out;
+  out.SetDoublePrecision(10);
+  out << YAML::BeginMap;
+  if (!node.empty()) out << YAML::Key << "node" << YAML::Value << node;
+  if (magnetometer != nullptr && magnetometer->ok()) emit_field(out, "magnetometer", *magnetometer);
+  if (accelerometer != nullptr && accelerometer->ok()) emit_field(out, "accelerometer", *accelerometer);
+  if (gyroscope != nullptr) {
+    out << YAML::Key << "gyroscope" << YAML::Value << YAML::BeginMap;
+    emit_channel(out, *gyroscope);
+    out << YAML::EndMap;
+  }
+  if (magnetometer != nullptr && magnetometer->ok()) {
+    const calib::FitQuality& q = magnetometer->quality;
+    out << YAML::Key << "quality" << YAML::Value << YAML::BeginMap;
+    out << YAML::Key << "pose_count" << YAML::Value << q.pose_count;
+    out << YAML::Key << "sample_count" << YAML::Value << q.sample_count;
+    out << YAML::Key << "residual_rms" << YAML::Value << q.residual_rms;
+    out << YAML::Key << "sphere_coverage" << YAML::Value << q.sphere_coverage;
+    out << YAML::Key << "octants_covered" << YAML::Value << q.octants_covered;
+    out << YAML::Key << "transform_condition" << YAML::Value << q.transform_condition;
+    out << YAML::Key << "warnings" << YAML::Value << YAML::Flow << q.warnings;
+    out << YAML::EndMap;
+  }
+  out << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
+std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations(const std::string& body_path) {
+  std::unordered_map<std::string, calib::SensorCalibration> out;
+  if (body_path.empty()) return out;
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(body_path);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(body_path + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
+  }
+  if (!root.IsMap() || !root["segments"] || !root["segments"].IsSequence()) return out;
+  for (const YAML::Node& s : root["segments"]) {
+    if (!s.IsMap() || !s["calibration"] || !s["name"]) continue;
+    const std::string node = s["node"] ? s["node"].as<std::string>() : s["name"].as<std::string>();
+    out[node] = load_calibration_file(resolve_relative(s["calibration"].as<std::string>(), body_path));
+  }
+  return out;
+}
+
+std::string resolve_relative(const std::string& path, const std::string& relative_to) {
+  const std::filesystem::path p(path);
+  if (p.is_absolute() || relative_to.empty()) return path;
+  return (std::filesystem::path(relative_to).parent_path() / p).lexically_normal().string();
+}
+
+}  // namespace bsn::dds

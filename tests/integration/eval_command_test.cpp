@@ -1,0 +1,94 @@
+// `bsn eval` as a user runs it: files and folders in, a table or the agreed JSON out, an SVG plot, clear errors.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "bsn/fusion/orientation_filter.hpp"
+#include "bsn/io/recording.hpp"
+#include "bsn/sim/mimu_synthesizer.hpp"
+#include "bsn/sim/motion_model.hpp"
+#include "process_fixture.hpp"
+
+namespace bsn::integration {
+namespace {
+
+class EvalCommand : public ProcessTest {
+ protected:
+  // Exact readings of a known rotation with its truth as reference, written as BROAD HDF5.
+  std::string write_trial(const std::string& name, std::uint64_t seed) {
+    const auto motion = sim::SinusoidalRotation::from_seed(seed);
+    sim::MimuSynthesizer synth(sim::EarthField{}, sim::WhiteNoise{}, seed);
+    io::Recording rec;
+    rec.sampling_rate_hz = 100.0;
+    const Eigen::Index n = 1500;
+    rec.gyr.resize(n, 3);
+    rec.acc.resize(n, 3);
+    rec.mag.resize(n, 3);
+    rec.opt_quat.resize(n, 4);
+    rec.movement.assign(static_cast<std::size_t>(n), 1);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      const auto m = motion.at(static_cast<double>(i) / 100.0);
+      const auto s = synth.measure(m, 0);
+      rec.gyr.row(i) = s.gyr.transpose();
+      rec.acc.row(i) = s.acc.transpose();
+      rec.mag.row(i) = s.mag.transpose();
+      const auto& q = m.q_sensor_to_earth;
+      rec.opt_quat.row(i) << q.w(), q.x(), q.y(), q.z();
+    }
+    const std::string path = (dir() / "trials" / (name + ".hdf5")).string();
+    std::filesystem::create_directories(dir() / "trials");
+    io::write_broad_hdf5(path, rec);
+    return path;
+  }
+
+  // Runs `bsn eval ARGS` to completion; returns the exit status, output in <dir>/<name>.log.
+  std::optional<int> run(const std::string& name, const std::vector<std::string>& args) {
+    spawn(name, args);
+    return child(name).wait_for(std::chrono::seconds(60));
+  }
+};
+
+int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXITSTATUS(*st) : -1; }
+
+TEST_F(EvalCommand, FolderToJsonAndPlot) {
+  write_trial("walk_a", 1);
+  write_trial("walk_b", 2);
+  const std::string svg = (dir() / "errors.svg").string();
+  const auto st =
+      run("eval", {"eval", (dir() / "trials").string(), "--filter", "complementary", "--json", "--plot", svg});
+  ASSERT_EQ(exit_code(st), 0) << read_file(log_path("eval"));
+  const std::string out = read_file(log_path("eval"));
+  EXPECT_NE(out.find("{\"trials\": [{\"trial\": \"walk_a\", \"filter\": \"complementary\", \"total_rmse_deg\": "),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("{\"trial\": \"walk_b\""), std::string::npos) << out;
+  EXPECT_NE(out.find("\"means\": [{\"filter\": \"complementary\", \"total_rmse_deg\": "), std::string::npos) << out;
+  const std::string image = read_file(svg);
+  EXPECT_EQ(image.rfind("<svg", 0), 0u);
+  EXPECT_NE(image.find("walk_b"), std::string::npos);
+}
+
+TEST_F(EvalCommand, TableWithEveryFilterByDefault) {
+  const std::string trial = write_trial("one", 3);
+  const auto st = run("eval", {"eval", trial});
+  ASSERT_EQ(exit_code(st), 0) << read_file(log_path("eval"));
+  const std::string out = read_file(log_path("eval"));
+  EXPECT_NE(out.find("total"), std::string::npos);
+  for (const auto& name : fusion::filter_names()) EXPECT_NE(out.find(name), std::string::npos) << name << "\n" << out;
+}
+
+TEST_F(EvalCommand, ClearErrors) {
+  const std::string trial = write_trial("one", 4);
+  EXPECT_EQ(exit_code(run("unknown_filter", {"eval", trial, "--filter", "nonesuch"})), 2);
+  EXPECT_NE(read_file(log_path("unknown_filter")).find("unknown filter 'nonesuch'"), std::string::npos);
+  EXPECT_EQ(exit_code(run("bad_param", {"eval", trial, "--filter", "complementary:tau=abc"})), 2);
+  EXPECT_NE(read_file(log_path("bad_param")).find("is not a number"), std::string::npos);
+  EXPECT_EQ(exit_code(run("missing", {"eval", (dir() / "nope.hdf5").string()})), 2);
+  EXPECT_NE(read_file(log_path("missing")).find("nope.hdf5: no such file"), std::string::npos);
+  write_file(dir() / "broken.hdf5", "not an hdf5 file");
+  EXPECT_EQ(exit_code(run("broken", {"eval", (dir() / "broken.hdf5").string(), "--filter", "complementary"})), 1);
+  EXPECT_NE(read_file(log_path("broken")).find("broken.hdf5: cannot open as HDF5"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace bsn::integration

@@ -1,0 +1,334 @@
+// MekfFilter (Nez et al. 2018, Appendix B) against its defining properties: the closed-form Phi and Q_d equal the
+// integrals they stand for, the quaternion integrator's 1/48 term removes the coning error, the magnetometer only
+// ever turns the yaw (Fan test B), the filter is consistent with the noise it assumes (NEES), the adaptive variant
+// switches by intensity with at least 10 s between switches, and bad input never touches the state.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "bsn/fusion/mekf_filter.hpp"
+#include "kalman_test_util.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+using namespace bsn::fusion::test;
+using mekf::Mat6;
+
+// Matrix exponential by scaling and squaring of a Taylor series; exact to rounding for the small norms used here.
+Mat6 expm(const Mat6& a) {
+  int squarings = 0;
+  double norm = a.cwiseAbs().rowwise().sum().maxCoeff();
+  while (norm > 0.1) {
+    norm /= 2;
+    ++squarings;
+  }
+  const Mat6 x = a / std::pow(2.0, squarings);
+  Mat6 term = Mat6::Identity(), sum = Mat6::Identity();
+  for (int k = 1; k < 20; ++k) {
+    term = term * x / k;
+    sum += term;
+  }
+  for (int i = 0; i < squarings; ++i) sum = sum * sum;
+  return sum;
+}
+
+Mat6 continuous_f(const Vec3& w) {
+  Mat6 f = Mat6::Zero();
+  f.topLeftCorner<3, 3>() << 0, w.z(), -w.y(), -w.z(), 0, w.x(), w.y(), -w.x(), 0;  // -[w x]
+  f.topRightCorner<3, 3>() = -Eigen::Matrix3d::Identity();
+  return f;
+}
+
+TEST(Mekf, ClosedFormTransitionEqualsTheMatrixExponential) {
+  for (const Vec3& w : {Vec3(0, 0, 0), Vec3(1e-4, -2e-4, 3e-5), Vec3(0.3, -1.0, 2.0), Vec3(-7.0, 5.0, 9.0)}) {
+    for (double T : {0.001, 0.01, 0.1}) {
+      const Mat6 expected = expm(continuous_f(w) * T);
+      EXPECT_LT((mekf::transition(w, T) - expected).cwiseAbs().maxCoeff(), 1e-12) << w.transpose() << " T " << T;
+    }
+  }
+}
+
+TEST(Mekf, ClosedFormProcessNoiseEqualsTheIntegral) {
+  const double sg = 0.02, sbg = 0.003;
+  Mat6 d = Mat6::Zero();
+  d.topLeftCorner<3, 3>().diagonal().setConstant(sg * sg);
+  d.bottomRightCorner<3, 3>().diagonal().setConstant(sbg * sbg);
+  for (const Vec3& w : {Vec3(0, 0, 0), Vec3(1e-3, 2e-3, -1e-3), Vec3(0.3, -1.0, 2.0), Vec3(-7.0, 5.0, 9.0)}) {
+    for (double T : {0.01, 0.1, 0.5}) {
+      // Simpson's rule with 400 intervals on the smooth integrand Phi(s) D Phi(s)^T.
+      const int n = 400;
+      Mat6 integral = Mat6::Zero();
+      for (int i = 0; i <= n; ++i) {
+        const double s = T * i / n;
+        const Mat6 phi = expm(continuous_f(w) * s);
+        const double weight = (i == 0 || i == n) ? 1.0 : (i % 2 ? 4.0 : 2.0);
+        integral += weight * phi * d * phi.transpose();
+      }
+      integral *= T / (3.0 * n);
+      const Mat6 closed = mekf::process_noise(w, T, sg, sbg);
+      EXPECT_LT((closed - integral).cwiseAbs().maxCoeff(), 1e-9 * integral.cwiseAbs().maxCoeff())
+          << w.transpose() << " T " << T;
+      EXPECT_LT((closed - closed.transpose()).cwiseAbs().maxCoeff(), 1e-18);
+    }
+  }
+}
+
+// Coning: the rate vector turns during the step. The mean-rate exponential misses the commutator; the 1/48 term
+// (second Magnus term) removes it, so the one-step error falls by far more than an order of magnitude.
+TEST(Mekf, IntegratorCommutatorTermRemovesTheConingError) {
+  const Vec3 w0(4.0, 0.0, 1.0), w1(0.0, 4.0, 1.0);
+  const double T = 0.02;
+  Quat truth = Quat::Identity();
+  const int n = 20000;
+  for (int i = 0; i < n; ++i) {
+    const double a = (i + 0.5) / n;
+    truth = truth * exp_rotation_vector(((1 - a) * w0 + a * w1) * (T / n));
+  }
+  const Quat with_term = mekf::integrate(Quat::Identity(), w0, w1, T);
+  const Quat mean_only = exp_rotation_vector(0.5 * (w0 + w1) * T);
+  const double err_term = angle_between(with_term, truth);
+  const double err_mean = angle_between(mean_only, truth);
+  EXPECT_GT(err_mean, 1e-5);  // the effect is real: (T^2/24) |w0 x w1| = 2.8e-4 rad
+  EXPECT_LT(err_term, 0.02 * err_mean);
+}
+
+TEST(Mekf, InitialisesFromTheFirstSampleForAnyHeadingAndStaysOnAStaticSensor) {
+  for (double yaw : {-179.0, -120.0, -45.0, 0.0, 60.0, 135.0, 180.0}) {
+    MekfFilter f;
+    const Quat q = from_yaw_pitch_roll({yaw * kDeg, -25 * kDeg, 40 * kDeg});
+    ASSERT_EQ(f.update(static_sample(q, 0)), UpdateResult::kInitialised);
+    EXPECT_LT(angle_between(f.orientation(), q), 1e-9) << yaw;
+    EXPECT_TRUE(f.flags().reinitialised);
+    EXPECT_TRUE(f.flags().initialising);
+    for (std::uint64_t k = 1; k <= 500; ++k)
+      ASSERT_EQ(f.update(static_sample(q, k * 10 * kMs)), UpdateResult::kUpdated);
+    EXPECT_LT(angle_between(f.orientation(), q), 1e-9) << yaw;
+    EXPECT_TRUE(f.flags().resting);
+    EXPECT_FALSE(f.flags().initialising);
+    EXPECT_FALSE(f.flags().mag_rejected);
+  }
+}
+
+// Static accuracy with sensor noise at every heading: the error stays well inside the accuracy a static sensor of
+// this noise allows (tilt noise ~ sigma_acc/g = 0.1 deg per sample, averaged by the filter), and a horizontal gyro
+// bias is learnt by the accelerometer update.
+TEST(Mekf, StaticAccuracyAnyHeadingWithNoiseAndBias) {
+  for (double yaw : {-150.0, -30.0, 90.0, 170.0}) {
+    MekfFilter f;
+    const Quat q = from_yaw_pitch_roll({yaw * kDeg, 5 * kDeg, -10 * kDeg});
+    const Vec3 bias = q.conjugate() * Vec3(0.01, -0.008, 0.0);  // horizontal in the earth frame
+    std::mt19937_64 rng(42);
+    std::normal_distribution<double> g(0.0, 1.0);
+    auto n3 = [&] { return Vec3(g(rng), g(rng), g(rng)); };
+    double sq = 0;
+    int count = 0;
+    for (std::uint64_t k = 0; k <= 6000; ++k) {
+      ImuSample s = static_sample(q, k * 10 * kMs);
+      s.acc += 0.02 * n3();
+      s.mag += 0.2 * n3();
+      s.gyr = bias + 0.003 * n3();
+      f.update(s);
+      if (k > 4000) {
+        sq += std::pow(angle_between(f.orientation(), q), 2);
+        ++count;
+      }
+    }
+    EXPECT_LT(std::sqrt(sq / count), 0.5 * kDeg) << yaw;
+    EXPECT_LT((f.gyro_bias() - bias).norm(), 1e-3) << yaw;
+  }
+}
+
+// Fan test B: a magnet approaches the static sensor five times (magnitude and dip change for a few seconds each).
+// All magnetic adaption off, as in Fan §3.2: roll and pitch must stay within 0.1 deg because the magnetometer
+// only turns the yaw (Suh's projection), while the yaw is pulled away (the disturbance is felt).
+TEST(Mekf, FanTestBMagnetDoesNotMoveRollAndPitch) {
+  for (bool adaptive : {false, true}) {
+    MekfFilter::Params p;
+    p.mag_rejection = 0.0;
+    MekfFilter f(p, adaptive);
+    const Quat q = from_yaw_pitch_roll({70 * kDeg, 12 * kDeg, -20 * kDeg});
+    double max_tilt_dev = 0, max_yaw_dev = 0;
+    for (std::uint64_t k = 0; k <= 3000; ++k) {
+      ImuSample s = static_sample(q, k * 10 * kMs);
+      s.mag += magnet_field(0.01 * static_cast<double>(k));
+      f.update(s);
+      const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
+      max_tilt_dev = std::max({max_tilt_dev, std::abs(est.pitch - 12 * kDeg), std::abs(est.roll + 20 * kDeg)});
+      max_yaw_dev = std::max(max_yaw_dev, std::abs(est.yaw - 70 * kDeg));
+    }
+    EXPECT_LT(max_tilt_dev, 0.1 * kDeg) << adaptive;
+    EXPECT_GT(max_yaw_dev, 1.0 * kDeg) << adaptive;
+  }
+}
+
+// With R-adaption the magnet is rejected once magnitude or dip leave their band; only the onset of each approach,
+// below the thresholds, can still pull the yaw (Fan §5.1), so the yaw moves far less than without it.
+TEST(Mekf, RAdaptionRejectsTheMagnetAndKeepsTheYaw) {
+  const Quat q = from_yaw_pitch_roll({-40 * kDeg, 0, 8 * kDeg});
+  double max_yaw_dev[2] = {0, 0};
+  int rejected[2] = {0, 0};
+  for (int rejection : {0, 1}) {
+    MekfFilter::Params p;
+    p.mag_rejection = rejection;
+    MekfFilter f(p, false);
+    for (std::uint64_t k = 0; k <= 3000; ++k) {
+      ImuSample s = static_sample(q, k * 10 * kMs);
+      s.mag += magnet_field(0.01 * static_cast<double>(k));
+      f.update(s);
+      rejected[rejection] += f.flags().mag_rejected ? 1 : 0;
+      max_yaw_dev[rejection] =
+          std::max(max_yaw_dev[rejection], std::abs(to_yaw_pitch_roll(f.orientation()).yaw + 40 * kDeg));
+    }
+  }
+  EXPECT_EQ(rejected[0], 0);
+  EXPECT_GT(rejected[1], 500);
+  EXPECT_LT(max_yaw_dev[1], 0.25 * max_yaw_dev[0]);
+  RecordProperty("yaw_dev_deg_without", std::to_string(max_yaw_dev[0] / kDeg));
+  RecordProperty("yaw_dev_deg_with", std::to_string(max_yaw_dev[1] / kDeg));
+}
+
+// Consistency: N independent runs of a sensor turning about all axes, with exactly the noise the filter assumes
+// (slow preset). The 6-dof NEES e^T P^-1 e of [dtheta, db] at the end of each run, averaged over the N runs, must lie
+// in the two-sided 95 % interval of chi^2(6 N) / N. Runs are independent, so the sum is chi^2(6 N) if P is right.
+TEST(Mekf, ConsistentNeesOnLongSimulatedRuns) {
+  const MekfNoise n = kNezTable3[1];
+  const double dt = 0.01;
+  const int runs = 24;
+  const int steps = 6000;  // 60 s each
+  double nees_sum = 0;
+  for (int r = 0; r < runs; ++r) {
+    MekfFilter::Params p;
+    p.preset = 1;
+    p.mag_rejection = 0.0;
+    p.init_bias_sigma_rad_s = 0.01;
+    MekfFilter f(p, false);
+    std::mt19937_64 rng(1000 + r);
+    std::normal_distribution<double> g(0.0, 1.0);
+    const Vec3 bias0 = p.init_bias_sigma_rad_s * Vec3(g(rng), g(rng), g(rng));
+    RotatingSensor sensor(7 + r, dt, {n.sigma_g, n.sigma_bg, n.sigma_a, n.sigma_m},
+                          from_yaw_pitch_roll({r * 0.7, 0.2, -0.1}), bias0);
+    f.update(sensor.first());
+    for (int k = 0; k < steps; ++k) f.update(sensor.next());
+    Eigen::Matrix<double, 6, 1> e;
+    e.head<3>() = body_error(f.orientation(), sensor.q());
+    e.tail<3>() = sensor.bias() - f.gyro_bias();
+    nees_sum += e.dot(f.covariance().ldlt().solve(e));
+  }
+  const double mean_nees = nees_sum / runs;
+  const auto [lo, hi] = chi2_interval_95(6.0 * runs, runs);
+  EXPECT_GT(mean_nees, lo);
+  EXPECT_LT(mean_nees, hi);
+  RecordProperty("mean_nees", std::to_string(mean_nees));
+}
+
+// The covariance stays symmetric positive definite through fast motion, magnetometer updates and switches.
+TEST(Mekf, CovarianceStaysSymmetricPositiveDefinite) {
+  MekfFilter f(MekfFilter::Params{}, true);
+  RotatingSensor sensor(3, 0.005, {0.01, 1e-3, 0.5, 1.0}, Quat::Identity(), Vec3(0.01, 0, 0), 6.0);
+  f.update(sensor.first());
+  for (int k = 0; k < 8000; ++k) {
+    f.update(sensor.next());
+    const Mat6& p = f.covariance();
+    ASSERT_LT((p - p.transpose()).cwiseAbs().maxCoeff(), 1e-15);
+    ASSERT_EQ(p.llt().info(), Eigen::Success) << k;
+  }
+}
+
+// Adaptive: static 20 s, then intermediate motion (5 rad/s) 20 s, then a chattering sequence that alternates static
+// and fast every 2 s for 40 s. The set follows the intensity where it is steady and never changes twice within 10 s.
+TEST(Mekf, AdaptiveSwitchesByIntensityNeverTwiceWithinTenSeconds) {
+  MekfFilter f(MekfFilter::Params{}, true);
+  EXPECT_EQ(f.name(), "mekf_adaptive");
+  const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
+  std::vector<double> switch_times;
+  int last_switches = 0;
+  int intensity_at_20s = -1, intensity_at_40s = -1;
+  for (std::uint64_t k = 0; k <= 8000; ++k) {
+    const double t = 0.01 * static_cast<double>(k);
+    ImuSample s = static_sample(q, k * 10 * kMs);
+    if (t >= 20 && t < 40) {
+      s.gyr = Vec3(0, 0, 5.0);  // 290 deg/s: intermediate
+    } else if (t >= 40 && static_cast<int>((t - 40) / 2) % 2 == 0) {
+      s.gyr = Vec3(12.0, 0, 0);  // 690 deg/s and 4 g of external acceleration: fast
+      s.acc += Vec3(0, 40.0, 0);
+    }
+    f.update(s);
+    if (f.state().switches != last_switches) {
+      switch_times.push_back(t);
+      last_switches = f.state().switches;
+    }
+    if (k == 1999) intensity_at_20s = f.intensity();
+    if (k == 3999) intensity_at_40s = f.intensity();
+  }
+  EXPECT_EQ(intensity_at_20s, 0);  // static
+  EXPECT_EQ(intensity_at_40s, 2);  // intermediate
+  ASSERT_GE(switch_times.size(), 3u);
+  for (std::size_t i = 1; i < switch_times.size(); ++i) EXPECT_GE(switch_times[i] - switch_times[i - 1], 10.0 - 1e-9);
+  EXPECT_GE(switch_times.front(), 10.0 - 1e-9);  // the initial choice counts as the first set
+  EXPECT_LE(switch_times.size(), 6u);
+}
+
+TEST(Mekf, SlowerMagnetometerAndSixDSamples) {
+  MekfFilter f;
+  RotatingSensor sensor(11, 0.01, {1e-3, 1e-5, 0.05, 0.3}, from_yaw_pitch_roll({2.0, 0.1, 0.3}), Vec3::Zero());
+  f.update(sensor.first());
+  double worst = 0;
+  for (int k = 1; k <= 6000; ++k) {
+    ImuSample s = sensor.next();
+    s.has_mag = (k % 4 == 0) && k < 3000;  // 25 Hz magnetometer, then none for 30 s
+    ASSERT_EQ(f.update(s), UpdateResult::kUpdated);
+    if (k > 1000) worst = std::max(worst, angle_between(f.orientation(), sensor.q()));
+  }
+  EXPECT_LT(worst, 2.0 * kDeg);
+}
+
+TEST(Mekf, BadInputNeverTouchesTheState) {
+  MekfFilter f;
+  const Quat q = from_yaw_pitch_roll({1.0, 0.2, -0.3});
+  f.update(static_sample(q, 0));
+  f.update(static_sample(q, 10 * kMs));
+  const MekfFilter::State before = f.state();
+  ImuSample bad = static_sample(q, 20 * kMs);
+  bad.gyr.x() = std::nan("");
+  EXPECT_EQ(f.update(bad), UpdateResult::kRejected);
+  bad = static_sample(q, 20 * kMs);
+  bad.mag.z() = INFINITY;
+  EXPECT_EQ(f.update(bad), UpdateResult::kRejected);
+  EXPECT_EQ(f.update(static_sample(q, 10 * kMs)), UpdateResult::kRejected);  // zero dt
+  EXPECT_EQ(f.update(static_sample(q, 5 * kMs)), UpdateResult::kRejected);   // backwards
+  EXPECT_EQ(f.state().q.coeffs(), before.q.coeffs());
+  EXPECT_EQ(f.state().p, before.p);
+  EXPECT_EQ(f.state().bias, before.bias);
+  // A gap longer than max_gap_s re-initialises and says so.
+  EXPECT_EQ(f.update(static_sample(q, 10 * kMs + 5'000 * kMs)), UpdateResult::kInitialised);
+  EXPECT_TRUE(f.flags().reinitialised);
+  // Saturated values and a huge step within the gap limit never give a non-finite state.
+  ImuSample wild = static_sample(q, 10 * kMs + 5'900 * kMs);
+  wild.gyr = Vec3(1e6, -1e6, 1e6);
+  wild.acc = Vec3(1e9, 0, -1e9);
+  wild.mag = Vec3(1e9, 1e9, 0);
+  f.update(wild);
+  EXPECT_TRUE(f.orientation().coeffs().allFinite());
+  EXPECT_TRUE(f.covariance().allFinite());
+  EXPECT_TRUE(f.gyro_bias().allFinite());
+}
+
+TEST(Mekf, FactoryMakesBothVariantsAndChecksParameters) {
+  auto f = make_filter({"mekf", {{"preset", 3}}});
+  EXPECT_EQ(f->name(), "mekf");
+  EXPECT_EQ(dynamic_cast<MekfFilter&>(*f).noise().sigma_m, 45.0);
+  auto g = make_filter({"mekf", {{"preset", 1}, {"sigma_a", 0.5}}});
+  EXPECT_EQ(dynamic_cast<MekfFilter&>(*g).noise().sigma_a, 0.5);
+  EXPECT_EQ(make_filter({"mekf_adaptive", {}})->name(), "mekf_adaptive");
+  EXPECT_THROW(make_filter({"mekf", {{"preset", 4}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"mekf", {{"preset", 1.5}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"mekf", {{"sigma_g", -1}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"mekf_adaptive", {{"sigma_g", 0.1}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"mekf", {{"no_such", 1}}}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace bsn::fusion

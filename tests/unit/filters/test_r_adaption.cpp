@@ -1,0 +1,78 @@
+// MagneticRAdaption against Fan et al. 2018 §2.2.1 / eq. 10: the variance factor is 1 in a clean field and infinite
+// while disturbed, with two thresholds and a minimum clean time so that a deviation hovering near one threshold does
+// not chatter.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <stdexcept>
+
+#include "bsn/fusion/r_adaption.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+constexpr std::uint64_t kMs = 1'000'000;
+
+TEST(MagneticRAdaption, CleanFieldKeepsTheNominalVariance) {
+  MagneticRAdaption r;
+  for (std::uint64_t k = 0; k < 100; ++k) {
+    EXPECT_EQ(r.update(k * 10 * kMs, 1.0 + 0.04 * std::sin(0.1 * static_cast<double>(k)), 0.05), 1.0);
+  }
+  EXPECT_FALSE(r.disturbed());
+}
+
+TEST(MagneticRAdaption, MagnitudeOrDipBeyondTheEnterThresholdGivesInfiniteVariance) {
+  MagneticRAdaption r;
+  EXPECT_TRUE(std::isinf(r.update(0, 1.11, 0.0)));
+  MagneticRAdaption r2;
+  EXPECT_TRUE(std::isinf(r2.update(0, 1.0, -0.18)));
+  MagneticRAdaption r3;
+  EXPECT_TRUE(std::isinf(r3.update(0, std::nan(""), 0.0)));
+}
+
+// A magnitude oscillating between the exit (5 %) and enter (10 %) thresholds must neither leave nor enter the
+// disturbed state: that is what the second threshold is for.
+TEST(MagneticRAdaption, TwoThresholdsDoNotChatter) {
+  MagneticRAdaption r;
+  r.update(0, 1.2, 0.0);
+  ASSERT_TRUE(r.disturbed());
+  for (std::uint64_t k = 1; k < 500; ++k) {
+    const double ratio = 1.075 + 0.02 * std::sin(0.3 * static_cast<double>(k));  // 5.5 % .. 9.5 %
+    EXPECT_TRUE(std::isinf(r.update(k * 10 * kMs, ratio, 0.0))) << k;
+  }
+  MagneticRAdaption clean;
+  for (std::uint64_t k = 0; k < 500; ++k) {
+    const double ratio = 1.075 + 0.02 * std::sin(0.3 * static_cast<double>(k));
+    EXPECT_EQ(clean.update(k * 10 * kMs, ratio, 0.0), 1.0) << k;
+  }
+}
+
+TEST(MagneticRAdaption, TrustsAgainOnlyAfterTheMinimumCleanTime) {
+  MagneticRAdaption::Params p;
+  p.min_clean_s = 1.0;
+  MagneticRAdaption r(p);
+  r.update(0, 1.5, 0.0);
+  // Clean from 10 ms on: still rejected up to 1.01 s, trusted from then on.
+  for (std::uint64_t t = 10; t < 1010; t += 10) EXPECT_TRUE(std::isinf(r.update(t * kMs, 1.0, 0.0))) << t;
+  EXPECT_EQ(r.update(1010 * kMs, 1.0, 0.0), 1.0);
+  // A short spike restarts the clean clock.
+  r.update(1020 * kMs, 1.3, 0.0);
+  EXPECT_TRUE(std::isinf(r.update(1500 * kMs, 1.0, 0.0)));
+  EXPECT_TRUE(std::isinf(r.update(2400 * kMs, 1.0, 0.0)));
+  EXPECT_EQ(r.update(2500 * kMs, 1.0, 0.0), 1.0);
+}
+
+TEST(MagneticRAdaption, RejectsInconsistentThresholds) {
+  MagneticRAdaption::Params p;
+  p.magnitude_exit = 0.2;  // above enter
+  EXPECT_THROW(MagneticRAdaption{p}, std::invalid_argument);
+  p = {};
+  p.dip_exit_rad = 0.0;
+  EXPECT_THROW(MagneticRAdaption{p}, std::invalid_argument);
+  p = {};
+  p.min_clean_s = -1.0;
+  EXPECT_THROW(MagneticRAdaption{p}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace bsn::fusion

@@ -1,0 +1,359 @@
+// Seel-Ruppin filter against the paper's own scenarios (sections 3.1 and 3.2), Fan's test B property, and the
+// contract every filter keeps (initialisation, dt from timestamps, gaps, slow magnetometer, bad input).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include "bsn/fusion/seel_ruppin_filter.hpp"
+
+namespace bsn::fusion {
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+const Vec3 kField(0, 49 * std::cos(64 * kDeg), -49 * std::sin(64 * kDeg));  // ENU, 49 uT, dip 64 deg
+
+std::uint64_t ns(double seconds) { return static_cast<std::uint64_t>(std::llround(seconds * 1e9)); }
+
+// A sample of a sensor at rest with true orientation q in the earth field `field`, gyro reading `gyr`.
+ImuSample static_sample(const Quat& q, double t, const Vec3& field = kField, const Vec3& gyr = Vec3::Zero()) {
+  ImuSample s;
+  s.timestamp_ns = ns(t);
+  s.acc = q.conjugate() * Vec3(0, 0, kGravity);
+  s.gyr = gyr;
+  s.mag = q.conjugate() * field;
+  return s;
+}
+
+Vec3 turned_about_up(const Vec3& v, double angle) { return Eigen::AngleAxisd(angle, Vec3::UnitZ()) * v; }
+
+double wrap(double a) { return std::remainder(a, 2 * std::numbers::pi); }
+
+// The paper's filter: no clipping of the accelerometer error, bias from the integral action (eq. 13) only.
+SeelRuppinFilter::Params params_with(double tau_acc, double tau_mag, double zeta) {
+  SeelRuppinFilter::Params p;
+  p.tau_acc_s = tau_acc;
+  p.tau_mag_s = tau_mag;
+  p.zeta = zeta;
+  p.max_acc_error_rad = std::numbers::pi;
+  p.rest_bias_lowpass = 0.0;
+  return p;
+}
+
+TEST(SeelRuppin, InitialisesFromTheFirstSampleForAnyHeading) {
+  for (double yaw : {-179.0, -120.0, -45.0, 0.0, 60.0, 135.0, 180.0}) {
+    SeelRuppinFilter f;
+    const Quat q = from_yaw_pitch_roll({yaw * kDeg, -25 * kDeg, 40 * kDeg});
+    ASSERT_EQ(f.update(static_sample(q, 0)), UpdateResult::kInitialised);
+    EXPECT_LT(angle_between(f.orientation(), q), 1e-9) << yaw;
+    EXPECT_TRUE(f.flags().reinitialised);
+    EXPECT_TRUE(f.flags().initialising);
+  }
+}
+
+// Section 3.1: at rest, the field's heading jumps (50 deg and ~180 deg) at constant magnitude and vertical
+// component. Roll and pitch must not move (< 0.01 deg); the yaw converges to the new field heading with the
+// half-value time tau_mag (the paper, section 2.3: "tau_acc and tau_mag are the approximate half-value
+// periods"), within +-20 %, for every tau_mag and sampling period.
+TEST(SeelRuppin, HeadingJumpTurnsOnlyYawWithHalfValueTimeTauMag) {
+  const Quat q_true = from_yaw_pitch_roll({20 * kDeg, 12 * kDeg, -8 * kDeg});
+  for (double jump_deg : {50.0, 178.0}) {
+    for (double tau_mag : {1.0, 5.0, 10.0}) {
+      for (double ts : {1.0 / 50, 1.0 / 100, 1.0 / 500}) {
+        SeelRuppinFilter f(params_with(2.0, tau_mag, 2.0));
+        f.update(static_sample(q_true, 0));
+        const Vec3 turned = turned_about_up(kField, jump_deg * kDeg);
+        // The true field heading turned by +jump: the estimate must turn by -jump to see it as north again.
+        const double yaw_target = wrap(to_yaw_pitch_roll(q_true).yaw - jump_deg * kDeg);
+        const auto steps = static_cast<int>(std::ceil(2.0 * tau_mag / ts));
+        double half_time = -1.0, max_tilt_change = 0.0;
+        for (int i = 1; i <= steps; ++i) {
+          const double t = i * ts;
+          f.update(static_sample(q_true, t, turned));
+          const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
+          const YawPitchRoll truth = to_yaw_pitch_roll(q_true);
+          max_tilt_change =
+              std::max({max_tilt_change, std::abs(est.pitch - truth.pitch), std::abs(wrap(est.roll - truth.roll))});
+          if (half_time < 0 && std::abs(wrap(est.yaw - yaw_target)) <= 0.5 * jump_deg * kDeg) half_time = t;
+        }
+        EXPECT_LT(max_tilt_change, 0.01 * kDeg) << jump_deg << " " << tau_mag << " " << ts;
+        EXPECT_NEAR(half_time, tau_mag, 0.2 * tau_mag) << jump_deg << " " << tau_mag << " " << ts;
+        EXPECT_FALSE(f.flags().mag_rejected);
+      }
+    }
+  }
+}
+
+// Runs the section 3.2 scenario: at rest, level, a 2 deg/s gyro bias about the vertical appears at t = 0.
+// Returns the absolute yaw error at each sample (100 Hz) over `duration` seconds.
+std::vector<double> yaw_error_after_bias_step(const SeelRuppinFilter::Params& p, double duration) {
+  SeelRuppinFilter f(p);
+  const Quat q_true = Quat::Identity();
+  f.update(static_sample(q_true, 0));
+  const Vec3 bias(0, 0, 2 * kDeg);
+  std::vector<double> errors;
+  const double ts = 0.01;
+  for (int i = 1; i <= static_cast<int>(duration / ts); ++i) {
+    f.update(static_sample(q_true, i * ts, kField, bias));
+    errors.push_back(std::abs(to_yaw_pitch_roll(f.orientation()).yaw));
+  }
+  return errors;
+}
+
+// Section 3.2, zeta > 0: the integral bias estimate removes the yaw error. The error of this PI loop decays at
+// best like exp(-t / (2.8 tau_mag)) and peaks at about 2 deg/s * 1.4 tau_mag, so the paper's "below 0.5 deg
+// within 5 tau_mag" is a property of tau_mag = 1 s with an aggressive zeta; we test exactly that.
+TEST(SeelRuppin, GyroBiasStepYawErrorVanishesWithIntegralAction) {
+  for (double zeta : {10.0, 15.0, 20.0}) {
+    const double tau_mag = 1.0;
+    const auto errors = yaw_error_after_bias_step(params_with(2.0, tau_mag, zeta), 20 * tau_mag);
+    double max_after = 0.0;
+    for (std::size_t i = static_cast<std::size_t>(5 * tau_mag / 0.01); i < errors.size(); ++i)
+      max_after = std::max(max_after, errors[i]);
+    EXPECT_LT(max_after, 0.5 * kDeg) << zeta;
+  }
+  // And the bias estimate itself converges to the true bias.
+  SeelRuppinFilter f(params_with(2.0, 1.0, 15.0));
+  f.update(static_sample(Quat::Identity(), 0));
+  for (int i = 1; i <= 3000; ++i) f.update(static_sample(Quat::Identity(), i * 0.01, kField, Vec3(0, 0, 2 * kDeg)));
+  EXPECT_NEAR(f.gyro_bias().z(), 2 * kDeg, 0.01 * kDeg);
+}
+
+// Section 3.2, zeta = 0: a proportional correction of an integrating plant leaves the steady offset
+// bias / (gain per second) = 2 deg/s * (1.4 tau_mag + ts).
+TEST(SeelRuppin, GyroBiasStepLeavesSteadyOffsetWithoutIntegralAction) {
+  for (double tau_mag : {1.0, 5.0}) {
+    const auto errors = yaw_error_after_bias_step(params_with(2.0, tau_mag, 0.0), 20 * tau_mag);
+    const double expected = 2 * kDeg * (1.4 * tau_mag + 0.01);
+    EXPECT_NEAR(errors.back(), expected, 0.02 * expected) << tau_mag;
+  }
+}
+
+// Fan's test B: a magnet brought near a static sensor five times (field magnitude and direction change in the
+// sensor frame). Roll and pitch stay within 0.1 deg, with and without magnetic-disturbance rejection.
+TEST(SeelRuppin, MagnetNearStaticSensorLeavesRollAndPitch) {
+  for (double rejection : {0.0, 1.0}) {
+    SeelRuppinFilter::Params p;
+    p.mag_rejection = rejection;
+    SeelRuppinFilter f(p);
+    const Quat q_true = from_yaw_pitch_roll({-70 * kDeg, 5 * kDeg, 10 * kDeg});
+    const YawPitchRoll truth = to_yaw_pitch_roll(q_true);
+    std::mt19937 rng(7);
+    std::normal_distribution<double> acc_noise(0.0, 0.02), gyr_noise(0.0, 0.002), mag_noise(0.0, 0.2);
+    const Vec3 magnet_sensor(60, -35, 80);  // uT at closest approach, sensor frame
+    double max_tilt = 0.0;
+    for (int i = 0; i <= 2500; ++i) {
+      const double t = i * 0.01;
+      ImuSample s = static_sample(q_true, t);
+      // Five approaches, each a smooth 2 s bump starting every 5 s.
+      const double phase = std::fmod(t, 5.0);
+      const double bump = phase < 2.0 ? std::pow(std::sin(std::numbers::pi * phase / 2.0), 2) : 0.0;
+      s.mag += bump * magnet_sensor + Vec3(mag_noise(rng), mag_noise(rng), mag_noise(rng));
+      s.acc += Vec3(acc_noise(rng), acc_noise(rng), acc_noise(rng));
+      s.gyr += Vec3(gyr_noise(rng), gyr_noise(rng), gyr_noise(rng));
+      f.update(s);
+      const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
+      max_tilt = std::max({max_tilt, std::abs(est.pitch - truth.pitch), std::abs(wrap(est.roll - truth.roll))});
+    }
+    EXPECT_LT(max_tilt, 0.1 * kDeg) << "mag_rejection " << rejection;
+  }
+}
+
+// The clipped accelerometer error (our addition for human motion): 0.3 s of a 3 g horizontal acceleration at
+// rest tilts the estimate by at most max_acc_error_rad / (1.4 tau_acc) * 0.3 s, while the paper's unclipped
+// correction follows the spike much further.
+TEST(SeelRuppin, ClippedAccelerometerErrorBoundsTheEffectOfAnAccelerationSpike) {
+  auto tilt_after_spike = [](const SeelRuppinFilter::Params& p) {
+    SeelRuppinFilter f(p);
+    f.update(static_sample(Quat::Identity(), 0));
+    for (int i = 1; i <= 30; ++i) {
+      ImuSample s = static_sample(Quat::Identity(), i * 0.01);
+      s.acc.x() += 3 * kGravity;
+      f.update(s);
+    }
+    return angle_between(f.orientation(), Quat::Identity());
+  };
+  SeelRuppinFilter::Params clipped;  // defaults: tau_acc 2 s, max_acc_error_rad 0.05
+  const double bound = clipped.max_acc_error_rad / (1.4 * clipped.tau_acc_s) * 0.3;
+  EXPECT_LE(tilt_after_spike(clipped), bound * 1.01);
+  EXPECT_GT(tilt_after_spike(params_with(2.0, 4.0, 1.0)), 10 * bound);
+}
+
+TEST(SeelRuppin, FlagsMagneticDisturbanceWhenRejectionIsOn) {
+  SeelRuppinFilter f;
+  const Quat q = Quat::Identity();
+  f.update(static_sample(q, 0));
+  ImuSample s = static_sample(q, 0.01, kField * 1.5);
+  f.update(s);
+  EXPECT_TRUE(f.flags().mag_rejected);
+  const Quat before = f.orientation();
+  // A disturbed field with a different heading must not turn the estimate.
+  for (int i = 2; i < 100; ++i) f.update(static_sample(q, i * 0.01, turned_about_up(kField * 1.5, 1.0)));
+  EXPECT_LT(angle_between(f.orientation(), before), 1e-9);
+  // Clean again only after mag_min_clean_s inside the inner band.
+  for (int i = 100; i < 150; ++i) f.update(static_sample(q, i * 0.01));
+  EXPECT_TRUE(f.flags().mag_rejected);
+  for (int i = 150; i < 250; ++i) f.update(static_sample(q, i * 0.01));
+  EXPECT_FALSE(f.flags().mag_rejected);
+}
+
+// A rotating sensor with consistent measurements: strapdown integration must keep the estimate on the truth.
+TEST(SeelRuppin, TracksAConstantRateRotation) {
+  SeelRuppinFilter f;
+  const Vec3 omega = Vec3(0.3, -0.5, 1.2);  // rad/s, sensor frame
+  Quat q_true = from_yaw_pitch_roll({10 * kDeg, 20 * kDeg, 30 * kDeg});
+  const double ts = 0.01;
+  double max_error = 0.0;
+  for (int i = 0; i <= 2000; ++i) {
+    f.update(static_sample(q_true, i * ts, kField, omega));
+    max_error = std::max(max_error, angle_between(f.orientation(), q_true));
+    q_true = (q_true * exp_rotation_vector(omega * ts)).normalized();
+  }
+  EXPECT_LT(max_error, 1e-6);
+}
+
+// The same motion sampled at 50 Hz and 400 Hz (with jittered timestamps) ends at the same orientation: dt comes
+// from the timestamps.
+TEST(SeelRuppin, TakesDtFromTimestamps) {
+  const Vec3 omega(0.0, 0.0, 0.8);
+  for (double rate : {50.0, 400.0}) {
+    SeelRuppinFilter f;
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> jitter(-0.2, 0.2);
+    Quat q_true = Quat::Identity();
+    double t = 0.0;
+    f.update(static_sample(q_true, t, kField, omega));
+    while (t < 3.0) {
+      const double dt = (1.0 + jitter(rng)) / rate;
+      q_true = (q_true * exp_rotation_vector(omega * dt)).normalized();
+      t += dt;
+      ImuSample s = static_sample(q_true, t, kField, omega);
+      s.has_mag = false;  // gyro only for yaw: any dt error would show
+      f.update(s);
+    }
+    EXPECT_LT(angle_between(f.orientation(), q_true), 1e-3) << rate;
+  }
+}
+
+// A magnetometer at 1/5 of the IMU rate: the heading half-value time is still tau_mag, and samples without a
+// magnetometer are plain 6D updates.
+TEST(SeelRuppin, SlowMagnetometerKeepsTauMag) {
+  const double tau_mag = 2.0, ts = 0.01;
+  SeelRuppinFilter f(params_with(2.0, tau_mag, 0.0));
+  const Quat q_true = Quat::Identity();
+  f.update(static_sample(q_true, 0));
+  const Vec3 turned = turned_about_up(kField, 40 * kDeg);
+  double half_time = -1.0;
+  for (int i = 1; i <= 600; ++i) {
+    ImuSample s = static_sample(q_true, i * ts, turned);
+    s.has_mag = (i % 5 == 0);
+    ASSERT_EQ(f.update(s), UpdateResult::kUpdated);
+    if (half_time < 0 && std::abs(wrap(to_yaw_pitch_roll(f.orientation()).yaw + 40 * kDeg)) <= 20 * kDeg)
+      half_time = i * ts;
+  }
+  EXPECT_NEAR(half_time, tau_mag, 0.2 * tau_mag);
+}
+
+TEST(SeelRuppin, InitialisesWithoutMagnetometerThenTakesTheHeadingAtOnce) {
+  SeelRuppinFilter f;
+  const Quat q_true = from_yaw_pitch_roll({100 * kDeg, 0, 0});
+  ImuSample s = static_sample(q_true, 0);
+  s.has_mag = false;
+  ASSERT_EQ(f.update(s), UpdateResult::kInitialised);
+  EXPECT_NEAR(to_yaw_pitch_roll(f.orientation()).yaw, 0.0, 1e-9);
+  f.update(static_sample(q_true, 0.01));
+  EXPECT_LT(angle_between(f.orientation(), q_true), 1e-6);
+}
+
+TEST(SeelRuppin, RejectsNonFiniteInputWithoutTouchingTheState) {
+  SeelRuppinFilter f;
+  const Quat q = from_yaw_pitch_roll({30 * kDeg, 0, 0});
+  f.update(static_sample(q, 0));
+  f.update(static_sample(q, 0.01, kField, Vec3(0.1, 0, 0)));
+  const auto before = f.state();
+  for (double bad : {std::nan(""), std::numeric_limits<double>::infinity()}) {
+    ImuSample s = static_sample(q, 0.02);
+    s.gyr.x() = bad;
+    EXPECT_EQ(f.update(s), UpdateResult::kRejected);
+    s = static_sample(q, 0.02);
+    s.mag.z() = bad;
+    EXPECT_EQ(f.update(s), UpdateResult::kRejected);
+  }
+  EXPECT_EQ(f.state().q.coeffs(), before.q.coeffs());
+  EXPECT_EQ(f.state().gyro_bias, before.gyro_bias);
+  EXPECT_EQ(f.state().last_ns, before.last_ns);
+  // Same or earlier timestamp (zero or negative dt): rejected too.
+  EXPECT_EQ(f.update(static_sample(q, 0.01)), UpdateResult::kRejected);
+  EXPECT_EQ(f.update(static_sample(q, 0.005)), UpdateResult::kRejected);
+  EXPECT_EQ(f.state().q.coeffs(), before.q.coeffs());
+}
+
+TEST(SeelRuppin, ExtremeFiniteValuesNeverProduceNaN) {
+  SeelRuppinFilter f;
+  f.update(static_sample(Quat::Identity(), 0));
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> exponent(-300, 300), sign(-1, 1);
+  double t = 0.0;
+  for (int i = 0; i < 5000; ++i) {
+    t += (i % 97 == 0) ? 1e6 : 0.01;  // also huge gaps
+    ImuSample s;
+    s.timestamp_ns = ns(t);
+    for (int k = 0; k < 3; ++k) {
+      s.acc[k] = sign(rng) * std::pow(10.0, exponent(rng) / 10);
+      s.gyr[k] = sign(rng) * std::pow(10.0, exponent(rng));
+      s.mag[k] = sign(rng) * std::pow(10.0, exponent(rng) / 10);
+    }
+    s.has_mag = (i % 3 != 0);
+    f.update(s);
+    ASSERT_TRUE(f.orientation().coeffs().allFinite()) << i;
+    ASSERT_TRUE(f.gyro_bias().allFinite()) << i;
+    ASSERT_NEAR(f.orientation().norm(), 1.0, 1e-9) << i;
+  }
+}
+
+TEST(SeelRuppin, GapsAreBridgedOrReinitialiseWithTheFlag) {
+  SeelRuppinFilter::Params p;
+  p.max_gap_s = 0.5;
+  SeelRuppinFilter f(p);
+  const Quat q = from_yaw_pitch_roll({-30 * kDeg, 10 * kDeg, 0});
+  f.update(static_sample(q, 0));
+  EXPECT_EQ(f.update(static_sample(q, 0.01)), UpdateResult::kUpdated);
+  EXPECT_FALSE(f.flags().reinitialised);
+  // 0.4 s gap rotating at 1 rad/s about z: bridged by the gyro.
+  const Vec3 omega(0, 0, 1.0);
+  const Quat q2 = (q * exp_rotation_vector(omega * 0.4)).normalized();
+  EXPECT_EQ(f.update(static_sample(q2, 0.41, kField, omega)), UpdateResult::kUpdated);
+  EXPECT_LT(angle_between(f.orientation(), q2), 0.5 * kDeg);
+  // A longer gap re-initialises from acc + mag.
+  const Quat q3 = from_yaw_pitch_roll({150 * kDeg, -20 * kDeg, 5 * kDeg});
+  EXPECT_EQ(f.update(static_sample(q3, 2.0)), UpdateResult::kInitialised);
+  EXPECT_TRUE(f.flags().reinitialised);
+  EXPECT_LT(angle_between(f.orientation(), q3), 1e-9);
+}
+
+TEST(SeelRuppin, RestingAndInitialisingFlags) {
+  SeelRuppinFilter f;
+  f.update(static_sample(Quat::Identity(), 0));
+  for (int i = 1; i <= 100; ++i) f.update(static_sample(Quat::Identity(), i * 0.01));
+  EXPECT_TRUE(f.flags().initialising);
+  EXPECT_FALSE(f.flags().resting);  // 1 s < rest_min_s
+  for (int i = 101; i <= 400; ++i) f.update(static_sample(Quat::Identity(), i * 0.01));
+  EXPECT_FALSE(f.flags().initialising);
+  EXPECT_TRUE(f.flags().resting);
+  f.update(static_sample(Quat::Identity(), 4.01, kField, Vec3(0.5, 0, 0)));
+  EXPECT_FALSE(f.flags().resting);
+}
+
+TEST(SeelRuppin, FactoryMakesItAndChecksParameters) {
+  auto f = make_filter({"seel_ruppin", {{"tau_acc_s", 3.0}, {"tau_mag_s", 9.0}, {"zeta", 0.0}}});
+  EXPECT_EQ(f->name(), "seel_ruppin");
+  EXPECT_THROW(make_filter({"seel_ruppin", {{"tau_mag_s", 0.0}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"seel_ruppin", {{"zeta", -1.0}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"seel_ruppin", {{"mag_rejection", 0.5}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"seel_ruppin", {{"no_such", 1.0}}}), std::invalid_argument);
+  EXPECT_THROW(make_filter({"seel_ruppin", {{"mag_norm_leave", 0.2}}}), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace bsn::fusion
