@@ -59,6 +59,31 @@ Quat exp_rotation_vector_fast(const Vec3& v) {
   return Quat(c, s * v.x(), s * v.y(), s * v.z());
 }
 
+// The accelerometer part of gradient(), J(q, up)^T f(q, up, a), written out: the terms of the general form that
+// multiply a zero component of up = (0, 0, 1) vanish exactly (Madgwick eqs. 25-26).
+Eigen::Vector4d gravity_gradient(const Quat& q, const Vec3& a) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  const double f0 = 2 * (x * z - w * y) - a.x();
+  const double f1 = 2 * (y * z + w * x) - a.y();
+  const double f2 = 1 - 2 * (x * x + y * y) - a.z();
+  return Eigen::Vector4d(-2 * y * f0 + 2 * x * f1, 2 * z * f0 + 2 * w * f1 - 4 * x * f2,
+                         -2 * w * f0 + 2 * z * f1 - 4 * y * f2, 2 * x * f0 + 2 * y * f1);
+}
+
+// The magnetometer part of gradient(), J(q, b)^T f(q, b, m), written out for b = (0, b1, b2) (the terms with
+// b0 = 0 vanish exactly; Madgwick eqs. 29-30 in ENU).
+Eigen::Vector4d field_gradient(const Quat& q, const Vec3& b, const Vec3& m) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  const double b1 = b.y(), b2 = b.z();
+  const double f0 = 2 * (x * y + w * z) * b1 + 2 * (x * z - w * y) * b2 - m.x();
+  const double f1 = (1 - 2 * (x * x + z * z)) * b1 + 2 * (y * z + w * x) * b2 - m.y();
+  const double f2 = 2 * (y * z - w * x) * b1 + (1 - 2 * (x * x + y * y)) * b2 - m.z();
+  return Eigen::Vector4d(2 * (z * b1 - y * b2) * f0 + 2 * (x * b2) * f1 + 2 * (-x * b1) * f2,
+                         2 * (y * b1 + z * b2) * f0 + 2 * (-2 * x * b1 + w * b2) * f1 + 2 * (-w * b1 - 2 * x * b2) * f2,
+                         2 * (x * b1 - w * b2) * f0 + 2 * (z * b2) * f1 + 2 * (z * b1 - 2 * y * b2) * f2,
+                         2 * (w * b1 + x * b2) * f0 + 2 * (-2 * z * b1 + y * b2) * f1 + 2 * (y * b1) * f2);
+}
+
 }  // namespace
 
 MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
@@ -149,7 +174,7 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
     const Vec3 rate = params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
     const Quat increment = exp_rotation_vector_fast(rate * dt);
     q = q * increment;
-    held_mag = increment.conjugate() * held_mag;  // a fixed earth vector seen from the turned sensor
+    if (use_magnetometer_) held_mag = increment.conjugate() * held_mag;  // a fixed earth vector, turned sensor
   }
   // Each norm once: the unit vectors serve both the usability test and the gradient.
   const double acc_squared_norm = s.has_acc ? s.acc.squaredNorm() : 0.0;
@@ -165,7 +190,11 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
   const bool use_mag = with_mag || (use_magnetometer_ && !s.has_mag && state_.held_mag_ns != 0 &&
                                     s.timestamp_ns - state_.held_mag_ns <= coeff_.max_gap_ns);
   if (acc_usable) {
-    const Eigen::Vector4d grad = gradient(q, acc_unit, held_mag, use_mag);
+    Eigen::Vector4d grad = gravity_gradient(q, acc_unit);  // = gradient(q, acc_unit, held_mag, use_mag)
+    if (use_mag) {
+      const Vec3 b = magnetic_reference(q, held_mag);
+      grad += field_gradient(q, b, held_mag);
+    }
     const double norm = grad.norm();
     if (norm > 1e-12) {
       const Eigen::Vector4d step = -params_.beta * dt / norm * grad;      // normalised gradient step

@@ -10,6 +10,7 @@
 #include <string_view>
 #include <vector>
 
+#include "bsn/config/yaml_reader.hpp"
 #include "bsn/dds/calibration_file.hpp"
 
 namespace bsn::dds {
@@ -19,41 +20,14 @@ using fusion::BodyModel;
 using fusion::FilterSpec;
 using fusion::SegmentSpec;
 
-class Parser {
+class Parser : public config::YamlReader<ConfigError> {
  public:
-  explicit Parser(std::string source) : source_(std::move(source)) {}
-
-  [[noreturn]] void fail(const YAML::Node& at, const std::string& what) const { fail_at(at.Mark().line + 1, what); }
-  [[noreturn]] void fail_at(int line, const std::string& what) const {
-    throw ConfigError(source_ + ":" + std::to_string(line) + ": " + what);
-  }
-
-  void require_map(const YAML::Node& n, const std::string& what) const {
-    if (!n.IsMap()) fail(n, what + " must be a mapping (key: value)");
-  }
-
-  void check_keys(const YAML::Node& n, std::initializer_list<std::string_view> known, const std::string& where) const {
-    for (const auto& kv : n) {
-      const std::string key = kv.first.as<std::string>();
-      bool ok = false;
-      for (auto k : known) ok = ok || key == k;
-      if (!ok) {
-        std::string list;
-        for (auto k : known) list += std::string(list.empty() ? "" : ", ") + std::string(k);
-        fail(kv.first, "unknown key '" + key + "' in " + where + " (known keys: " + list + ")");
-      }
-    }
-  }
-
-  std::string scalar(const YAML::Node& n, const std::string& what) const {
-    if (!n.IsScalar()) fail(n, what + " must be a single value");
-    return n.as<std::string>();
-  }
+  using YamlReader::YamlReader;
 
   fusion::AxisSequence axes(const YAML::Node& n) const {
-    const std::string text = scalar(n, "joint_axes");
-    auto seq = fusion::parse_axis_sequence(text);
-    if (!seq) fail(n, "joint_axes '" + text + "' is not a sequence of three distinct axes such as zyx or zxy");
+    const std::string name = text(n, "joint_axes");
+    auto seq = fusion::parse_axis_sequence(name);
+    if (!seq) fail(n, "joint_axes '" + name + "' is not a sequence of three distinct axes such as zyx or zxy");
     return *seq;
   }
 
@@ -61,7 +35,7 @@ class Parser {
     require_map(n, "filter");
     FilterSpec spec = base;
     if (n["name"]) {
-      const std::string name = scalar(n["name"], "filter name");
+      const std::string name = text(n["name"], "filter name");
       if (name != base.name) spec.parameters.clear();  // another filter: the defaults' parameters do not apply
       spec.name = name;
     }
@@ -89,7 +63,7 @@ class Parser {
   // `calibration: FILE` (relative to the body file): loaded here only to report a bad file at its line; the
   // fusion service reads it again with load_body_calibrations().
   void check_calibration(const YAML::Node& n) const {
-    const std::string path = resolve_relative(scalar(n, "calibration"), source_);
+    const std::string path = resolve_relative(text(n, "calibration"), source());
     try {
       (void)load_calibration_file(path);
     } catch (const ConfigError& e) {
@@ -102,7 +76,7 @@ class Parser {
     require_map(root, "the body model");
     check_keys(root, {"name", "defaults", "segments"}, "the body model");
     BodyModel model;
-    if (root["name"]) model.name = scalar(root["name"], "name");
+    if (root["name"]) model.name = text(root["name"], "name");
 
     FilterSpec default_filter;
     fusion::AxisSequence default_axes;
@@ -122,10 +96,10 @@ class Parser {
       check_keys(s, {"name", "node", "parent", "joint", "joint_axes", "filter", "calibration"}, "segment");
       SegmentSpec spec;
       if (!s["name"]) fail(s, "segment without 'name'");
-      spec.name = scalar(s["name"], "name");
-      spec.node = s["node"] ? scalar(s["node"], "node") : spec.name;
-      if (s["parent"] && !s["parent"].IsNull()) spec.parent = scalar(s["parent"], "parent");
-      if (s["joint"]) spec.joint = scalar(s["joint"], "joint");
+      spec.name = text(s["name"], "name");
+      spec.node = s["node"] ? text(s["node"], "node") : spec.name;
+      if (s["parent"] && !s["parent"].IsNull()) spec.parent = text(s["parent"], "parent");
+      if (s["joint"]) spec.joint = text(s["joint"], "joint");
       spec.joint_axes = s["joint_axes"] ? axes(s["joint_axes"]) : default_axes;
       spec.filter = s["filter"] ? filter(s["filter"], default_filter) : default_filter;
       if (s["calibration"]) check_calibration(s["calibration"]);
@@ -137,9 +111,6 @@ class Parser {
     }
     return model;
   }
-
- private:
-  std::string source_;
 };
 
 // yaml-cpp reports an unclosed '[' or '{' where it gave up looking for the closing bracket: the next line or the

@@ -8,46 +8,30 @@
 #include <fstream>
 #include <sstream>
 
+#include "bsn/config/yaml_reader.hpp"
+
 namespace bsn::dds {
 namespace {
 
-[[noreturn]] void fail(const std::string& source, const YAML::Node& at, const std::string& what) {
-  throw ConfigError(source + ":" + std::to_string(at.Mark().line + 1) + ": " + what);
+using Reader = config::YamlReader<ConfigError>;
+
+calib::Vec3 vector3(const Reader& r, const YAML::Node& n, const std::string& what) {
+  if (!n.IsSequence() || n.size() != 3) r.fail(n, what + " must be a list of 3 numbers");
+  return {r.number(n[0], what), r.number(n[1], what), r.number(n[2], what)};
 }
 
-double number(const std::string& source, const YAML::Node& n, const std::string& what) {
-  double v = 0.0;
-  try {
-    if (!n.IsScalar()) fail(source, n, what + " must be a number");
-    v = n.as<double>();
-  } catch (const YAML::Exception&) {
-    fail(source, n, what + " must be a number");
-  }
-  if (!std::isfinite(v)) fail(source, n, what + " must be finite");
-  return v;
-}
-
-calib::Vec3 vector3(const std::string& source, const YAML::Node& n, const std::string& what) {
-  if (!n.IsSequence() || n.size() != 3) fail(source, n, what + " must be a list of 3 numbers");
-  return {number(source, n[0], what), number(source, n[1], what), number(source, n[2], what)};
-}
-
-calib::ChannelCalibration channel(const std::string& source, const YAML::Node& n, const std::string& name) {
-  if (!n.IsMap()) fail(source, n, name + " must be a mapping with bias and transform");
-  for (const auto& kv : n) {
-    const std::string key = kv.first.as<std::string>();
-    if (key != "bias" && key != "transform" && key != "field_magnitude" && key != "field_vector")
-      fail(source, kv.first,
-           "unknown key '" + key + "' in " + name + " (known keys: bias, transform, field_magnitude, field_vector)");
-  }
+calib::ChannelCalibration channel(const Reader& r, const YAML::Node& n, const std::string& name) {
+  r.check_keys(n, {"bias", "transform", "field_magnitude", "field_vector"}, name);
   calib::ChannelCalibration c;
-  if (n["bias"]) c.bias = vector3(source, n["bias"], name + " bias");
+  if (n["bias"]) c.bias = vector3(r, n["bias"], name + " bias");
   if (const YAML::Node t = n["transform"]) {
-    if (!t.IsSequence() || t.size() != 3) fail(source, t, name + " transform must be a list of 3 rows of 3 numbers");
-    for (std::size_t r = 0; r < 3; ++r)
-      c.transform.row(static_cast<Eigen::Index>(r)) = vector3(source, t[r], name + " transform row").transpose();
-    if (!(std::abs(c.transform.determinant()) > 1e-12 * std::pow(c.transform.norm(), 3)))
-      fail(source, t, name + " transform is singular");
+    if (!t.IsSequence() || t.size() != 3) r.fail(t, name + " transform must be a list of 3 rows of 3 numbers");
+    for (std::size_t row = 0; row < 3; ++row) {
+      c.transform.row(static_cast<Eigen::Index>(row)) = vector3(r, t[row], name + " transform row").transpose();
+    }
+    if (!(std::abs(c.transform.determinant()) > 1e-12 * std::pow(c.transform.norm(), 3))) {
+      r.fail(t, name + " transform is singular");
+    }
   }
   return c;
 }
@@ -61,27 +45,18 @@ calib::SensorCalibration parse_calibration(const std::string& yaml_text, const s
   } catch (const YAML::ParserException& e) {
     throw ConfigError(source + ":" + std::to_string(e.mark.line + 1) + ": YAML syntax error: " + e.msg);
   }
-  if (!root || root.IsNull()) throw ConfigError(source + ":1: the calibration file is empty");
-  if (!root.IsMap()) fail(source, root, "a calibration file must be a mapping");
+  const Reader reader(source);
+  if (!root || root.IsNull()) reader.fail_at(1, "the calibration file is empty");
   calib::SensorCalibration out;
   try {
-    for (const auto& kv : root) {
-      const std::string key = kv.first.as<std::string>();
-      if (key == "magnetometer") {
-        out.magnetometer = channel(source, kv.second, key);
-      } else if (key == "accelerometer") {
-        out.accelerometer = channel(source, kv.second, key);
-      } else if (key == "gyroscope") {
-        out.gyroscope = channel(source, kv.second, key);
-      } else if (key != "node" && key != "quality") {
-        fail(source, kv.first,
-             "unknown key '" + key + "' (known keys: node, magnetometer, accelerometer, gyroscope, quality)");
-      }
-    }
+    reader.check_keys(root, {"node", "magnetometer", "accelerometer", "gyroscope", "quality"}, "the calibration file");
+    if (root["magnetometer"]) out.magnetometer = channel(reader, root["magnetometer"], "magnetometer");
+    if (root["accelerometer"]) out.accelerometer = channel(reader, root["accelerometer"], "accelerometer");
+    if (root["gyroscope"]) out.gyroscope = channel(reader, root["gyroscope"], "gyroscope");
   } catch (const YAML::Exception& e) {
-    throw ConfigError(source + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
+    reader.fail_at(e.mark.line + 1, e.msg);
   }
-  if (out.empty()) fail(source, root, "the calibration file holds no magnetometer, accelerometer or gyroscope");
+  if (out.empty()) reader.fail(root, "the calibration file holds no magnetometer, accelerometer or gyroscope");
   return out;
 }
 

@@ -10,54 +10,16 @@
 #include <sstream>
 #include <string_view>
 
+#include "bsn/config/yaml_reader.hpp"
+
 namespace bsn::sim {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-class Parser {
+class Parser : public config::YamlReader<ScenarioError> {
  public:
-  explicit Parser(std::string source) : source_(std::move(source)) {}
-
-  [[noreturn]] void fail(const YAML::Node& at, const std::string& what) const { fail_at(at.Mark().line + 1, what); }
-  [[noreturn]] void fail_at(int line, const std::string& what) const {
-    throw ScenarioError(source_ + ":" + std::to_string(line) + ": " + what);
-  }
-
-  void require_map(const YAML::Node& n, const std::string& what) const {
-    if (!n.IsMap()) fail(n, what + " must be a mapping (key: value)");
-  }
-
-  void check_keys(const YAML::Node& n, std::initializer_list<std::string_view> known, const std::string& where) const {
-    require_map(n, where);
-    for (const auto& kv : n) {
-      const std::string key = kv.first.as<std::string>();
-      bool ok = false;
-      for (auto k : known) ok = ok || key == k;
-      if (!ok) {
-        std::string list;
-        for (auto k : known) list += std::string(list.empty() ? "" : ", ") + std::string(k);
-        fail(kv.first, "unknown key '" + key + "' in " + where + " (known keys: " + list + ")");
-      }
-    }
-  }
-
-  std::string text(const YAML::Node& n, const std::string& what) const {
-    if (!n.IsScalar()) fail(n, what + " must be a single value");
-    return n.as<std::string>();
-  }
-
-  double number(const YAML::Node& n, const std::string& what) const {
-    if (!n.IsScalar()) fail(n, what + " must be a number");
-    double v = 0.0;
-    try {
-      v = n.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(n, what + " must be a number, not '" + n.as<std::string>() + "'");
-    }
-    if (!std::isfinite(v)) fail(n, what + " must be finite");
-    return v;
-  }
+  using YamlReader::YamlReader;
   double positive(const YAML::Node& n, const std::string& what) const {
     const double v = number(n, what);
     if (!(v > 0.0)) fail(n, what + " must be > 0");
@@ -350,7 +312,7 @@ class Parser {
                {"name", "description", "duration_s", "rate_hz", "seed", "sensors", "body", "magnetic", "movement"},
                "the scenario");
     ScenarioSpec spec;
-    spec.name = root["name"] ? text(root["name"], "name") : std::filesystem::path(source_).stem().string();
+    spec.name = root["name"] ? text(root["name"], "name") : std::filesystem::path(source()).stem().string();
     if (root["description"]) spec.description = text(root["description"], "description");
     if (!root["duration_s"]) fail(root, "the scenario needs duration_s");
     spec.duration_s = positive(root["duration_s"], "duration_s");
@@ -372,9 +334,6 @@ class Parser {
     if (root["movement"]) spec.movement = windows(root["movement"], "movement", 0.0);
     return spec;
   }
-
- private:
-  std::string source_;
 };
 
 }  // namespace

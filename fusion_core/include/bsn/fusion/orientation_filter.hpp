@@ -55,7 +55,7 @@ class OrientationFilter {
 
 /// A filter's name and parameter overrides (name -> value, SI units as each filter documents).
 struct FilterSpec {
-  std::string name = "complementary";
+  std::string name = "seel_ruppin";  ///< the default: the most accurate on the BROAD recordings
   std::vector<std::pair<std::string, double>> parameters;
 };
 
