@@ -1,9 +1,11 @@
 #include "bsn/calib/field_calibration.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
 #include <Eigen/SVD>
 #include <cmath>
+#include <complex>
 #include <string>
 
 namespace bsn::calib {
@@ -60,24 +62,29 @@ EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw) {
     return fit;
   }
 
-  // Quadric a x^2 + b y^2 + c z^2 + 2d xy + 2e xz + 2f yz + 2g x + 2h y + 2i z + j = 0, algebraic least squares
-  // with |coefficients| = 1: the eigenvector of the smallest eigenvalue of D^T D.
+  // Quadric a x^2 + b y^2 + c z^2 + 2f yz + 2g xz + 2h xy + 2p x + 2q y + 2r z + d = 0 with the coefficients
+  // split into the quadratic part v1 = (a, b, c, f, g, h) and the linear part v2 = (p, q, r, d); design row
+  // (x^2, y^2, z^2, 2yz, 2xz, 2xy, 2x, 2y, 2z, 1) and scatter S = [S11 S12; S21 S22].
   using Mat10 = Eigen::Matrix<double, 10, 10>;
   using Vec10 = Eigen::Matrix<double, 10, 1>;
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  using Mat4 = Eigen::Matrix4d;
   Mat10 scatter = Mat10::Zero();
   for (Eigen::Index k = 0; k < p.cols(); ++k) {
     const double x = p(0, k), y = p(1, k), z = p(2, k);
     Vec10 row;
-    row << x * x, y * y, z * z, 2 * x * y, 2 * x * z, 2 * y * z, 2 * x, 2 * y, 2 * z, 1.0;
+    row << x * x, y * y, z * z, 2 * y * z, 2 * x * z, 2 * x * y, 2 * x, 2 * y, 2 * z, 1.0;
     scatter.selfadjointView<Eigen::Lower>().rankUpdate(row);
   }
   scatter = scatter.selfadjointView<Eigen::Lower>();
-  const Eigen::SelfAdjointEigenSolver<Mat10> eig(scatter);
+  // The condition of the (unconstrained) algebraic problem, for the quality report: a near-null second direction
+  // of the design scatter means the readings admit more than one quadric.
+  const Eigen::SelfAdjointEigenSolver<Mat10> eig(scatter, Eigen::EigenvaluesOnly);
   if (eig.info() != Eigen::Success) {
     fit.message = "eigen decomposition of the ellipsoid problem did not converge";
     return fit;
   }
-  const Vec10 v = eig.eigenvectors().col(0);
   const double lambda_max = eig.eigenvalues()(9);
   const double lambda_2 = eig.eigenvalues()(1);
   fit.condition_number = lambda_2 > 0.0 ? std::sqrt(lambda_max / lambda_2) : INFINITY;
@@ -87,8 +94,59 @@ EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw) {
     return fit;
   }
 
+  // Li & Griffiths 2004: minimise v^T S v subject to 4J - I^2 = 1 (I = a + b + c, J = ab + bc + ac - f^2 - g^2 -
+  // h^2), which admits only ellipsoids (for axis ratios below 2, far beyond any magnetometer or accelerometer).
+  // For fixed v1 the best v2 is -S22^-1 S21 v1, leaving (S11 - S12 S22^-1 S21) v1 = lambda C v1 with
+  // v1^T C v1 = 4J - I^2; exactly one eigenvector has v1^T C v1 > 0, and it is the solution.
+  const Mat6 s11 = scatter.topLeftCorner<6, 6>();
+  const Eigen::Matrix<double, 6, 4> s12 = scatter.topRightCorner<6, 4>();
+  const Mat4 s22 = scatter.bottomRightCorner<4, 4>();
+  const Eigen::LDLT<Mat4> s22_solver(s22);
+  if (s22_solver.info() != Eigen::Success || !(s22_solver.vectorD().minCoeff() > 1e-14 * lambda_max)) {
+    fit.message = "the readings do not determine an ellipsoid (linear part singular)";
+    fit.condition_number = 0.0;
+    return fit;
+  }
+  const Eigen::Matrix<double, 4, 6> linear_from_quadratic = -s22_solver.solve(s12.transpose());
+  const Mat6 reduced = s11 + s12 * linear_from_quadratic;
+  Mat6 constraint = Mat6::Zero();
+  constraint.topLeftCorner<3, 3>() << -1, 1, 1, 1, -1, 1, 1, 1, -1;
+  constraint.bottomRightCorner<3, 3>() = -4.0 * Eigen::Matrix3d::Identity();
+  // C^-1 in closed form: the top-left block [-1 1 1; 1 -1 1; 1 1 -1] has inverse [0 1 1; 1 0 1; 1 1 0] / 2.
+  Mat6 constraint_inverse = Mat6::Zero();
+  constraint_inverse.topLeftCorner<3, 3>() << 0, 0.5, 0.5, 0.5, 0, 0.5, 0.5, 0.5, 0;
+  constraint_inverse.bottomRightCorner<3, 3>() = -0.25 * Eigen::Matrix3d::Identity();
+  const Eigen::EigenSolver<Mat6> generalised(constraint_inverse * reduced);
+  if (generalised.info() != Eigen::Success) {
+    fit.message = "eigen decomposition of the ellipsoid problem did not converge";
+    return fit;
+  }
+  // Choose by the sign of the constraint rather than of lambda: with noise-free data lambda is ~0 and its sign is
+  // rounding noise, while v1^T C v1 > 0 stays clear.
+  Vec6 v1 = Vec6::Zero();
+  double best_constraint = 0.0;
+  for (Eigen::Index i = 0; i < 6; ++i) {
+    const Eigen::Matrix<std::complex<double>, 6, 1> candidate = generalised.eigenvectors().col(i);
+    if (std::abs(generalised.eigenvalues()(i).imag()) > 1e-9 * std::abs(generalised.eigenvalues()(i)) + 1e-300)
+      continue;
+    const Vec6 real_part = candidate.real();
+    const double norm_sq = real_part.squaredNorm();
+    if (!(norm_sq > 0.0)) continue;
+    const double value = real_part.dot(constraint * real_part) / norm_sq;
+    if (value > best_constraint) {
+      best_constraint = value;
+      v1 = real_part;
+    }
+  }
+  if (!(best_constraint > 0.0)) {
+    fit.message = "the fitted quadric is not an ellipsoid: the readings do not cover enough directions";
+    return fit;
+  }
+  Vec10 v;
+  v << v1, linear_from_quadratic * v1;
+
   Mat3 a;
-  a << v(0), v(3), v(4), v(3), v(1), v(5), v(4), v(5), v(2);
+  a << v(0), v(5), v(4), v(5), v(1), v(3), v(4), v(3), v(2);
   const Vec3 w(v(6), v(7), v(8));
   const Eigen::FullPivLU<Mat3> lu(a);
   if (!lu.isInvertible()) {

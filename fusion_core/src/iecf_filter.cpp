@@ -48,32 +48,6 @@ const P& checked(const P& p, std::string_view name) {
   return p;
 }
 
-// exp_rotation_vector(v) without trig for the angles of one sample step (|v| < 0.2 rad): cos(h) and sin(h) / h,
-// h = |v| / 2, as Taylor series in h^2 (truncation below 1e-20). Larger angles take the exact trig path.
-Quat exp_rotation_vector_fast(const Vec3& v) {
-  const double h2 = 0.25 * v.squaredNorm();
-  if (!(h2 < 1e-2)) return exp_rotation_vector(v);
-  const double c =
-      1.0 - h2 * (1.0 / 2) *
-                (1.0 - h2 * (1.0 / 12) * (1.0 - h2 * (1.0 / 30) * (1.0 - h2 * (1.0 / 56) * (1.0 - h2 * (1.0 / 90)))));
-  const double s =
-      0.5 * (1.0 - h2 * (1.0 / 6) *
-                       (1.0 - h2 * (1.0 / 20) *
-                                  (1.0 - h2 * (1.0 / 42) * (1.0 - h2 * (1.0 / 72) * (1.0 - h2 * (1.0 / 110))))));
-  return Quat(c, s * v.x(), s * v.y(), s * v.z());
-}
-
-// Earth axes in sensor coordinates, q* (x) e (x) q for a unit q: the rows of R(q).
-Vec3 up_in_sensor(const Quat& q) {
-  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
-  return Vec3(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y));
-}
-
-Vec3 east_in_sensor(const Quat& q) {
-  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
-  return Vec3(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y));
-}
-
 }  // namespace
 
 IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
@@ -140,7 +114,7 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   const double acc_squared_norm = s.has_acc ? s.acc.squaredNorm() : 0.0;
   if (acc_squared_norm > 1e-12) {
     const Vec3 a = s.acc / std::sqrt(acc_squared_norm);
-    const Vec3 up_est = up_in_sensor(q);
+    const Vec3 up_est = earth_axis_in_sensor(q, 2);
     error += a.cross(up_est);  // e_a: measured x predicted up
     // mag_usable(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|.
     const double mag_squared_norm = use_magnetometer_ && s.has_mag ? s.mag.squaredNorm() : 0.0;
@@ -152,7 +126,7 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
         mag_used = true;
       } else {
         const Vec3 east_measured = s.mag.cross(a).normalized();  // north x up = east (ENU x)
-        const Vec3 east_predicted = east_in_sensor(q);
+        const Vec3 east_predicted = earth_axis_in_sensor(q, 0);
         // Weighted by the time since the last used reading, so the heading gain holds per second with a
         // magnetometer slower than the IMU.
         const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
@@ -168,7 +142,7 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   }
 
   const Vec3 rate = !s.has_gyr ? Vec3::Zero() : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
-  q = (q * exp_rotation_vector_fast((rate + gain * error) * dt)).normalized();  // eqs. 14-15, exact for the step
+  q = (q * exp_rotation_vector((rate + gain * error) * dt)).normalized();  // eqs. 14-15, exact for the step
   if (!q.coeffs().allFinite()) {
     mag_detector_ = detector_before;  // extreme finite input: keep the state
     return UpdateResult::kRejected;

@@ -20,19 +20,6 @@ inline Mat3 skew(const Vec3& a) {
   return m;
 }
 
-/// exp of a rotation vector as a unit quaternion, as exp_rotation_vector, with the Taylor series of cos(a/2) and
-/// sin(a/2)/a below a = 0.05 rad (truncation error below 1e-20), where the filters' steps and corrections lie.
-inline Quat rotation_from_vector(const Vec3& v) {
-  const double a2 = v.squaredNorm();
-  if (a2 < 0.05 * 0.05) {
-    const double h2 = 0.25 * a2;  // (a/2)^2
-    const double c = 1.0 - h2 / 2.0 * (1.0 - h2 / 12.0 * (1.0 - h2 / 30.0 * (1.0 - h2 / 56.0)));
-    const double s = 0.5 * (1.0 - h2 / 6.0 * (1.0 - h2 / 20.0 * (1.0 - h2 / 42.0 * (1.0 - h2 / 72.0))));
-    return Quat(c, s * v.x(), s * v.y(), s * v.z());
-  }
-  return exp_rotation_vector(v);
-}
-
 /// True when acc and mag give a well-defined TRIAD orientation (neither zero nor parallel).
 inline bool acc_mag_usable(const Vec3& acc, const Vec3& mag) {
   const double na = acc.norm(), nm = mag.norm();

@@ -44,21 +44,6 @@ bool mag_usable_units(double mag_squared_norm, double acc_squared_norm, const Ve
   return mag_squared_norm > 1e-18 && acc_squared_norm > 1e-12 && mag_unit.cross(acc_unit).squaredNorm() > 1e-6;
 }
 
-// exp_rotation_vector(v) without trig for the angles of one sample step (|v| < 0.2 rad): cos(h) and sin(h) / h,
-// h = |v| / 2, as Taylor series in h^2 (truncation below 1e-20). Larger angles take the exact trig path.
-Quat exp_rotation_vector_fast(const Vec3& v) {
-  const double h2 = 0.25 * v.squaredNorm();
-  if (!(h2 < 1e-2)) return exp_rotation_vector(v);
-  const double c =
-      1.0 - h2 * (1.0 / 2) *
-                (1.0 - h2 * (1.0 / 12) * (1.0 - h2 * (1.0 / 30) * (1.0 - h2 * (1.0 / 56) * (1.0 - h2 * (1.0 / 90)))));
-  const double s =
-      0.5 * (1.0 - h2 * (1.0 / 6) *
-                       (1.0 - h2 * (1.0 / 20) *
-                                  (1.0 - h2 * (1.0 / 42) * (1.0 - h2 * (1.0 / 72) * (1.0 - h2 * (1.0 / 110))))));
-  return Quat(c, s * v.x(), s * v.y(), s * v.z());
-}
-
 // The accelerometer part of gradient(), J(q, up)^T f(q, up, a), written out: the terms of the general form that
 // multiply a zero component of up = (0, 0, 1) vanish exactly (Madgwick eqs. 25-26).
 Eigen::Vector4d gravity_gradient(const Quat& q, const Vec3& a) {
@@ -172,7 +157,7 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
   // q_dot = q (x) (0, w) / 2 is its first-order approximation).
   if (s.has_gyr) {
     const Vec3 rate = params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
-    const Quat increment = exp_rotation_vector_fast(rate * dt);
+    const Quat increment = exp_rotation_vector(rate * dt);
     q = q * increment;
     if (use_magnetometer_) held_mag = increment.conjugate() * held_mag;  // a fixed earth vector, turned sensor
   }

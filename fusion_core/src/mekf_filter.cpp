@@ -113,7 +113,7 @@ namespace mekf {
 
 Quat integrate(const Quat& q, const Vec3& w_prev, const Vec3& w_now, double T) {
   const Vec3 w_mean = 0.5 * (w_prev + w_now);
-  Quat dq = kalman_support::rotation_from_vector(w_mean * T);
+  Quat dq = exp_rotation_vector(w_mean * T);
   // Second Magnus term for a rate varying linearly over the step (the paper's 1/48 commutator term).
   dq.vec() += (T * T / 24.0) * w_prev.cross(w_now);
   return (q * dq).normalized();
@@ -266,7 +266,7 @@ void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n) {
   const Mat3 ka = a * hx.transpose() * s_inv;              // attitude rows of K
   const Mat3 kb = b.transpose() * hx.transpose() * s_inv;  // bias rows of K
   const Vec3 residual = acc - z_hat;
-  state_.q = (state_.q * kalman_support::rotation_from_vector(ka * residual)).normalized();
+  state_.q = (state_.q * exp_rotation_vector(ka * residual)).normalized();
   state_.bias += kb * residual;
   // Joseph form (I - K H) P (I - K H)^T + K R K^T: stays symmetric positive definite under rounding.
   // I - K H = [G 0; L I] with G = I - ka hx, L = -kb hx.
@@ -313,7 +313,7 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
   // Suh's gain projection: only the rotation about the vertical survives, the bias is untouched.
   const Mat3 k_att = r3 * r3.transpose() * p_att * hm.transpose() * s_m.inverse();
   const Vec3 dtheta = k_att * (s.mag - z_hat);
-  state_.q = (state_.q * kalman_support::rotation_from_vector(dtheta)).normalized();
+  state_.q = (state_.q * exp_rotation_vector(dtheta)).normalized();
   // Joseph form with the full covariance, exact for this (suboptimal) gain: I - K H = [G 0; 0 I].
   const Mat3 g = Mat3::Identity() - k_att * hm;
   state_.p.topLeftCorner<3, 3>() = g * p_att * g.transpose() + r * k_att * k_att.transpose();

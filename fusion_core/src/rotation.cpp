@@ -75,16 +75,6 @@ double angle_between(const Quat& q_a, const Quat& q_b) {
   return 2.0 * std::acos(std::clamp(std::abs(e.w()), 0.0, 1.0));
 }
 
-Quat exp_rotation_vector(const Vec3& v) {
-  const double angle = v.norm();
-  if (angle < 1e-12) {
-    // Second-order series keeps unit norm to machine precision for tiny angles.
-    return Quat(1.0, 0.5 * v.x(), 0.5 * v.y(), 0.5 * v.z()).normalized();
-  }
-  const double s = std::sin(0.5 * angle) / angle;
-  return Quat(std::cos(0.5 * angle), s * v.x(), s * v.y(), s * v.z());
-}
-
 Quat orientation_from_acc_mag(const Vec3& acc, const Vec3& mag) {
   // Earth axes expressed in the sensor frame: up along acc, east = north x up ... built by cross products.
   const Vec3 up = acc.normalized();

@@ -61,32 +61,6 @@ const P& checked(const P& p) {
   return p;
 }
 
-// exp_rotation_vector(v) without trig for the angles of one sample step (|v| < 0.2 rad): cos(h) and sin(h) / h,
-// h = |v| / 2, as Taylor series in h^2 (truncation below 1e-20). Larger angles take the exact trig path.
-Quat exp_rotation_vector_fast(const Vec3& v) {
-  const double h2 = 0.25 * v.squaredNorm();
-  if (!(h2 < 1e-2)) return exp_rotation_vector(v);
-  const double c =
-      1.0 - h2 * (1.0 / 2) *
-                (1.0 - h2 * (1.0 / 12) * (1.0 - h2 * (1.0 / 30) * (1.0 - h2 * (1.0 / 56) * (1.0 - h2 * (1.0 / 90)))));
-  const double s =
-      0.5 * (1.0 - h2 * (1.0 / 6) *
-                       (1.0 - h2 * (1.0 / 20) *
-                                  (1.0 - h2 * (1.0 / 42) * (1.0 - h2 * (1.0 / 72) * (1.0 - h2 * (1.0 / 110))))));
-  return Quat(c, s * v.x(), s * v.y(), s * v.z());
-}
-
-// Earth axes in sensor coordinates, q* (x) e (x) q for a unit q: the rows of R(q).
-Vec3 up_in_sensor(const Quat& q) {
-  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
-  return Vec3(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y));
-}
-
-Vec3 north_in_sensor(const Quat& q) {
-  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
-  return Vec3(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x));
-}
-
 // atan2(y, x), by its series for the small angles (|y| < 0.01 x) of a correction step (truncation below 1e-22).
 double atan2_fast(double y, double x) {
   if (x > 0.0 && std::abs(y) < 0.01 * x) {
@@ -156,7 +130,7 @@ UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
 // Eqs. 7-10 and the accelerometer part of eq. 13.
 void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
   const Vec3 a = acc.normalized();
-  const Vec3 r_acc = up_in_sensor(state_.q);  // eq. 7: earth vertical in sensor coordinates
+  const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);  // eq. 7: earth vertical in sensor coordinates
   const Vec3 cross = a.cross(r_acc);
   const double sin_err = cross.norm();
   const double cos_err = a.dot(r_acc);
@@ -170,14 +144,14 @@ void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
   // At 180 deg the axis is undefined; any axis perpendicular to a is a shortest correction.
   const Vec3 axis = sin_err > 1e-12 ? Vec3(cross / sin_err) : Vec3(a.unitOrthogonal());
   const double k = acc_gain_.gain(dt, coeff_.tau_acc_14);
-  state_.q = (state_.q * exp_rotation_vector_fast(k * alpha * axis)).normalized();  // eq. 10
-  state_.gyro_bias -= coeff_.bias_factor_acc * k * alpha * axis;                    // eq. 13 (b = -gyro_bias)
+  state_.q = (state_.q * exp_rotation_vector(k * alpha * axis)).normalized();  // eq. 10
+  state_.gyro_bias -= coeff_.bias_factor_acc * k * alpha * axis;               // eq. 13 (b = -gyro_bias)
 }
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
 // magnetometer turns the heading only.
 void SeelRuppinFilter::correct_mag(const ImuSample& s) {
-  const Vec3 r_acc = up_in_sensor(state_.q);
+  const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);
   if (params_.mag_rejection != 0.0 && mag_detector_.update(s.timestamp_ns, s.mag, r_acc)) {
     state_.flags.mag_rejected = true;
     return;
@@ -187,7 +161,7 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
     state_.flags.mag_rejected = true;  // field (nearly) vertical: no heading information
     return;
   }
-  const Vec3 r_mag = north_in_sensor(state_.q);  // ENU: magnetic north is earth y
+  const Vec3 r_mag = earth_axis_in_sensor(state_.q, 1);  // ENU: magnetic north is earth y
   const double alpha = signed_angle(m_horizontal, r_mag, r_acc);
   // The gain uses the time since the last used magnetometer reading, so tau_mag holds in seconds even when the
   // magnetometer is slower than the IMU.
@@ -196,7 +170,7 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
                             ? static_cast<double>(since_mag) * 1e-9
                             : static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   const double k = state_.heading_known ? mag_gain_.gain(dt_mag, coeff_.tau_mag_14) : 1.0;
-  state_.q = (state_.q * exp_rotation_vector_fast(k * alpha * r_acc)).normalized();  // eq. 12
+  state_.q = (state_.q * exp_rotation_vector(k * alpha * r_acc)).normalized();  // eq. 12
   if (state_.heading_known) state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
   state_.heading_known = true;
   state_.last_mag_ns = s.timestamp_ns;
@@ -220,7 +194,7 @@ UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
   state_.flags.mag_rejected = false;
 
   // Strapdown prediction with the bias-corrected rate (eq. 14), exact for a rate constant over the step.
-  if (s.has_gyr) state_.q = (state_.q * exp_rotation_vector_fast((s.gyr - state_.gyro_bias) * dt)).normalized();
+  if (s.has_gyr) state_.q = (state_.q * exp_rotation_vector((s.gyr - state_.gyro_bias) * dt)).normalized();
   if (s.has_acc && s.acc.squaredNorm() > 1e-12) correct_acc(s.acc, dt);
   if (s.has_mag) correct_mag(s);
   const double max_bias = params_.max_gyro_bias_rad_s;

@@ -7,6 +7,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <array>
+#include <cmath>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -55,8 +56,39 @@ Quat relative_orientation(const Quat& q_parent, const Quat& q_child);
 /// Rotation angle of q_a * conj(q_b) in radians, in [0, pi]: the total orientation error (BROAD's metric).
 double angle_between(const Quat& q_a, const Quat& q_b);
 
-/// Quaternion of the rotation by the rotation vector v (axis * angle, radians).
-Quat exp_rotation_vector(const Vec3& v);
+/// Quaternion of the rotation by the rotation vector v (axis * angle, radians). Inline and trig-free for the
+/// small angles of per-sample steps and corrections: below a half-angle of 0.1 rad the Taylor series of
+/// cos(a/2) and sin(a/2)/a are used (truncation error below 1e-20); larger angles take sin and cos.
+inline Quat exp_rotation_vector(const Vec3& v) {
+  const double h2 = 0.25 * v.squaredNorm();  // (angle / 2)^2
+  if (!(h2 < 1e-2)) {
+    const double angle = v.norm();
+    const double s = std::sin(0.5 * angle) / angle;
+    return Quat(std::cos(0.5 * angle), s * v.x(), s * v.y(), s * v.z());
+  }
+  const double c =
+      1.0 - h2 * (1.0 / 2) *
+                (1.0 - h2 * (1.0 / 12) * (1.0 - h2 * (1.0 / 30) * (1.0 - h2 * (1.0 / 56) * (1.0 - h2 * (1.0 / 90)))));
+  const double s =
+      0.5 * (1.0 - h2 * (1.0 / 6) *
+                       (1.0 - h2 * (1.0 / 20) *
+                                  (1.0 - h2 * (1.0 / 42) * (1.0 - h2 * (1.0 / 72) * (1.0 - h2 * (1.0 / 110))))));
+  return Quat(c, s * v.x(), s * v.y(), s * v.z());
+}
+
+/// Earth axis `axis` (0 = east, 1 = north, 2 = up) in sensor coordinates for a unit sensor-to-earth q:
+/// conj(q) * e * q, which is row `axis` of R(q), computed without a full rotation.
+inline Vec3 earth_axis_in_sensor(const Quat& q, int axis) {
+  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+  switch (axis) {
+    case 0:
+      return Vec3(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y));
+    case 1:
+      return Vec3(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x));
+    default:
+      return Vec3(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y));
+  }
+}
 
 /// Sensor-to-earth orientation whose earth z is along the specific force (up) and whose earth y is along the
 /// horizontal part of the magnetic field (north). Correct for any heading. Requires acc and mag not parallel.
