@@ -95,7 +95,8 @@ EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw) {
   }
 
   // Li & Griffiths 2004: minimise v^T S v subject to 4J - I^2 = 1 (I = a + b + c, J = ab + bc + ac - f^2 - g^2 -
-  // h^2), which admits only ellipsoids (for axis ratios below 2, far beyond any magnetometer or accelerometer).
+  // h^2). 4J - I^2 > 0 forces the quadratic part to be definite, so only ellipsoids qualify; every ellipsoid whose
+  // shortest axis is at least half its longest does, far beyond any magnetometer's or accelerometer's distortion.
   // For fixed v1 the best v2 is -S22^-1 S21 v1, leaving (S11 - S12 S22^-1 S21) v1 = lambda C v1 with
   // v1^T C v1 = 4J - I^2; exactly one eigenvector has v1^T C v1 > 0, and it is the solution.
   const Mat6 s11 = scatter.topLeftCorner<6, 6>();
@@ -125,11 +126,11 @@ EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw) {
   // rounding noise, while v1^T C v1 > 0 stays clear.
   Vec6 v1 = Vec6::Zero();
   double best_constraint = 0.0;
+  const double largest_eigenvalue = generalised.eigenvalues().cwiseAbs().maxCoeff();
   for (Eigen::Index i = 0; i < 6; ++i) {
-    const Eigen::Matrix<std::complex<double>, 6, 1> candidate = generalised.eigenvectors().col(i);
-    if (std::abs(generalised.eigenvalues()(i).imag()) > 1e-9 * std::abs(generalised.eigenvalues()(i)) + 1e-300)
-      continue;
-    const Vec6 real_part = candidate.real();
+    // The eigenvalues are real in theory; a clearly complex pair is rounding on a degenerate problem, not a fit.
+    if (std::abs(generalised.eigenvalues()(i).imag()) > 1e-9 * largest_eigenvalue) continue;
+    const Vec6 real_part = generalised.eigenvectors().col(i).real();
     const double norm_sq = real_part.squaredNorm();
     if (!(norm_sq > 0.0)) continue;
     const double value = real_part.dot(constraint * real_part) / norm_sq;

@@ -36,8 +36,9 @@ struct EllipsoidFit {
 };
 
 /// Fits an ellipsoid to raw readings (at least 9, finite, not constant, not in one plane). The data are centred
-/// and scaled first; the quadric's algebraic least-squares solution is the eigenvector of the smallest eigenvalue
-/// of the 10x10 design scatter; a quadric that is not an ellipsoid is reported as a failure.
+/// and scaled first; the quadric's algebraic least squares is constrained to ellipsoids (Li & Griffiths 2004:
+/// 4J - I^2 = 1), solved as a 6x6 generalised eigenproblem, so partial coverage or noise cannot turn the result
+/// into a hyperboloid; a quadric that still is not a real ellipsoid is reported as a failure.
 EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw);
 
 /// The symmetric factor K = M Lambda sqrt(D) Lambda^T of eq. 20 (K^T K = M^2 Sigma): H up to a rotation.
