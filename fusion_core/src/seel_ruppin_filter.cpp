@@ -17,6 +17,7 @@ constexpr ParamField<P> kParams[] = {
     {"tau_mag_s", &P::tau_mag_s},
     {"zeta", &P::zeta},
     {"max_acc_error_rad", &P::max_acc_error_rad},
+    {"acc_lowpass_tau_s", &P::acc_lowpass_tau_s},
     {"rest_bias_lowpass", &P::rest_bias_lowpass},
     {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
     {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
@@ -50,6 +51,7 @@ const P& checked(const P& p) {
   require_positive(kName, p.max_gyro_bias_rad_s, "max_gyro_bias_rad_s");
   require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
   require_positive(kName, p.max_gap_s, "max_gap_s");
+  require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
   require_positive(kName, p.init_period_s, "init_period_s");
   for (const auto& [value, name] :
        {std::pair{p.mag_rejection, "mag_rejection"}, std::pair{p.rest_bias_lowpass, "rest_bias_lowpass"}}) {
@@ -89,6 +91,43 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params)
   coeff_.acc_clip_test = params.max_acc_error_rad < std::numbers::pi;
   coeff_.sin_max_acc_error = std::sin(params.max_acc_error_rad);
   coeff_.cos_max_acc_error = std::cos(params.max_acc_error_rad);
+  coeff_.acc_lowpass = params.acc_lowpass_tau_s > 0.0;
+  coeff_.acc_lowpass_fc_hz =
+      coeff_.acc_lowpass ? std::numbers::sqrt2 / (2.0 * std::numbers::pi * params.acc_lowpass_tau_s) : 0.0;
+}
+
+void SeelRuppinFilter::LowPassCache::update(double dt, double fc_hz) {
+  if (dt == cached_dt) return;
+  cached_dt = dt;
+  // Bilinear transform with pre-warping of a second-order Butterworth low-pass.
+  const double w = std::tan(std::numbers::pi * fc_hz * dt);
+  const double w2 = w * w;
+  const double norm = 1.0 / (1.0 + std::numbers::sqrt2 * w + w2);
+  b0 = w2 * norm;
+  b1 = 2.0 * b0;
+  b2 = b0;
+  a1 = 2.0 * (w2 - 1.0) * norm;
+  a2 = (1.0 - std::numbers::sqrt2 * w + w2) * norm;
+}
+
+Vec3 SeelRuppinFilter::lowpass_acc(const Vec3& acc, double dt) {
+  acc_lp_.update(dt, coeff_.acc_lowpass_fc_hz);
+  const Vec3 x = state_.q_gyr._transformVector(acc);
+  if (state_.acc_lp_warmup_s < params_.acc_lowpass_tau_s) {
+    // Start-up: for the first tau the output is the running mean of all inputs, and the low-pass is kept in
+    // the steady state of that mean. Started from one sample instead, the low-pass would hold that sample's
+    // noise for several tau.
+    state_.acc_lp_warmup_s += dt;
+    state_.acc_lp_count += 1.0;
+    state_.acc_lp_mean += (x - state_.acc_lp_mean) / state_.acc_lp_count;
+    state_.acc_lp_s1 = (1.0 - acc_lp_.b0) * state_.acc_lp_mean;
+    state_.acc_lp_s2 = (acc_lp_.b2 - acc_lp_.a2) * state_.acc_lp_mean;
+    return state_.q_gyr.conjugate()._transformVector(state_.acc_lp_mean);
+  }
+  const Vec3 y = acc_lp_.b0 * x + state_.acc_lp_s1;
+  state_.acc_lp_s1 = acc_lp_.b1 * x - acc_lp_.a1 * y + state_.acc_lp_s2;
+  state_.acc_lp_s2 = acc_lp_.b2 * x - acc_lp_.a2 * y;
+  return state_.q_gyr.conjugate()._transformVector(y);
 }
 
 double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
@@ -111,6 +150,11 @@ UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
   const bool mag_usable =
       s.has_mag && s.mag.norm() > 1e-9 && s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
   state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  state_.q_gyr = Quat::Identity();
+  state_.acc_lp_s1 = state_.acc_lp_s2 = Vec3::Zero();
+  state_.acc_lp_warmup_s = 0.0;
+  state_.acc_lp_count = 1.0;  // the start-up mean begins with this sample (q_gyr = identity)
+  state_.acc_lp_mean = s.acc;
   state_.initialised = true;
   state_.heading_known = mag_usable;
   state_.last_ns = s.timestamp_ns;
@@ -145,7 +189,8 @@ void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
   const Vec3 axis = sin_err > 1e-12 ? Vec3(cross / sin_err) : Vec3(a.unitOrthogonal());
   const double k = acc_gain_.gain(dt, coeff_.tau_acc_14);
   state_.q = (state_.q * exp_rotation_vector(k * alpha * axis)).normalized();  // eq. 10
-  state_.gyro_bias -= coeff_.bias_factor_acc * k * alpha * axis;               // eq. 13 (b = -gyro_bias)
+  // Eq. 13 (b = -gyro_bias); not while initialising, when corrections remove the initial error, not a bias.
+  if (!state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_acc * k * alpha * axis;
 }
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
@@ -171,7 +216,9 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
                             : static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   const double k = state_.heading_known ? mag_gain_.gain(dt_mag, coeff_.tau_mag_14) : 1.0;
   state_.q = (state_.q * exp_rotation_vector(k * alpha * r_acc)).normalized();  // eq. 12
-  if (state_.heading_known) state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
+  if (state_.heading_known && !state_.flags.initialising) {
+    state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
+  }
   state_.heading_known = true;
   state_.last_mag_ns = s.timestamp_ns;
 }
@@ -192,10 +239,17 @@ UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
   const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = false;
+  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
 
   // Strapdown prediction with the bias-corrected rate (eq. 14), exact for a rate constant over the step.
-  if (s.has_gyr) state_.q = (state_.q * exp_rotation_vector((s.gyr - state_.gyro_bias) * dt)).normalized();
-  if (s.has_acc && s.acc.squaredNorm() > 1e-12) correct_acc(s.acc, dt);
+  if (s.has_gyr) {
+    const Quat dq = exp_rotation_vector((s.gyr - state_.gyro_bias) * dt);
+    state_.q = (state_.q * dq).normalized();
+    if (coeff_.acc_lowpass) state_.q_gyr = (state_.q_gyr * dq).normalized();
+  }
+  if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
+    correct_acc(coeff_.acc_lowpass ? lowpass_acc(s.acc, dt) : s.acc, dt);
+  }
   if (s.has_mag) correct_mag(s);
   const double max_bias = params_.max_gyro_bias_rad_s;
   state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);
@@ -212,7 +266,6 @@ UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
   }
   state_.last_ns = s.timestamp_ns;
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
 }
 
