@@ -63,13 +63,42 @@ const P& checked(const P& p) {
   return p;
 }
 
-// atan2(y, x), by its series for the small angles (|y| < 0.01 x) of a correction step (truncation below 1e-22).
+// atan(t) / t for t^2 <= 0.01 by its Taylor series, relative truncation error below 1e-15: the correction
+// angles of a filter step are small, and this is several times cheaper than atan2. The usual tiny angles take
+// four terms; the rest seven, evaluated in Estrin's scheme (short dependency chains).
+constexpr double kSeriesMaxT2 = 1e-2;
+double atan_over_t(double t2) {
+  if (t2 < 1e-4) return 1.0 - t2 * (1.0 / 3 - t2 * (1.0 / 5 - t2 * (1.0 / 7)));
+  const double t4 = t2 * t2;
+  return (1.0 - t2 * (1.0 / 3)) +
+         t4 * ((1.0 / 5 - t2 * (1.0 / 7)) + t4 * ((1.0 / 9 - t2 * (1.0 / 11)) + t4 * (1.0 / 13)));
+}
+
+// atan2(y, x), by the series for the usual small angles (|y| < 0.1 x).
 double atan2_fast(double y, double x) {
-  if (x > 0.0 && std::abs(y) < 0.01 * x) {
-    const double t = y / x, t2 = t * t;
-    return t * (1.0 - t2 * (1.0 / 3 - t2 * (1.0 / 5 - t2 * (1.0 / 7 - t2 * (1.0 / 9)))));
+  if (x > 0.0 && y * y < kSeriesMaxT2 * x * x) {
+    const double t = y / x;
+    return t * atan_over_t(t * t);
   }
   return std::atan2(y, x);
+}
+
+// Bounds far beyond any MEMS sensor's range: a value past them is corrupt, and rejecting it keeps every
+// quantity of the filter bounded, so no sum or product can overflow.
+constexpr double kMaxAccSquared = 1e4 * 1e4;  // (m/s^2)^2: 1000 g
+constexpr double kMaxGyrSquared = 1e4 * 1e4;  // (rad/s)^2
+constexpr double kMaxMagSquared = 1e5 * 1e5;  // uT^2: 0.1 T
+bool physically_possible(const ImuSample& s) {
+  return (!s.has_acc || s.acc.squaredNorm() <= kMaxAccSquared) &&
+         (!s.has_gyr || s.gyr.squaredNorm() <= kMaxGyrSquared) && (!s.has_mag || s.mag.squaredNorm() <= kMaxMagSquared);
+}
+
+// q / |q| for a q whose norm is within rounding of 1 (a product of unit quaternions): one Newton step of
+// 1/sqrt(n2) around 1, exact to O((n2 - 1)^2); anything further off is normalised exactly.
+Quat renormalised(const Quat& q) {
+  const double n2 = q.squaredNorm();
+  if (std::abs(n2 - 1.0) < 1e-6) return Quat(q.coeffs() * (1.5 - 0.5 * n2));
+  return q.normalized();
 }
 
 // Signed angle from v to w about the unit axis n (v and w perpendicular to n, not necessarily unit).
@@ -91,6 +120,8 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params)
   coeff_.acc_clip_test = params.max_acc_error_rad < std::numbers::pi;
   coeff_.sin_max_acc_error = std::sin(params.max_acc_error_rad);
   coeff_.cos_max_acc_error = std::cos(params.max_acc_error_rad);
+  const double tan_max = params.max_acc_error_rad < std::numbers::pi / 2 ? std::tan(params.max_acc_error_rad) : 1.0;
+  coeff_.small_acc_error_tan2 = std::min(kSeriesMaxT2, tan_max * tan_max);
   coeff_.acc_lowpass = params.acc_lowpass_tau_s > 0.0;
   coeff_.acc_lowpass_fc_hz =
       coeff_.acc_lowpass ? std::numbers::sqrt2 / (2.0 * std::numbers::pi * params.acc_lowpass_tau_s) : 0.0;
@@ -171,26 +202,36 @@ UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
-// Eqs. 7-10 and the accelerometer part of eq. 13.
+// Eqs. 7-10 and the accelerometer part of eq. 13. The accelerometer is not normalised: the error angle
+// atan2(|a x r|, a . r) and the clipping test are scale-invariant.
 void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
-  const Vec3 a = acc.normalized();
   const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);  // eq. 7: earth vertical in sensor coordinates
-  const Vec3 cross = a.cross(r_acc);
-  const double sin_err = cross.norm();
-  const double cos_err = a.dot(r_acc);
-  // alpha = min(atan2(sin, cos), max) (robust form of the paper's arccos). A clipped error needs no atan2: for
-  // max < pi, alpha >= max exactly when sin(alpha - max) >= 0.
-  const double alpha =
-      coeff_.acc_clip_test && sin_err * coeff_.cos_max_acc_error - cos_err * coeff_.sin_max_acc_error >= 0.0
-          ? params_.max_acc_error_rad
-          : std::min(atan2_fast(sin_err, cos_err), params_.max_acc_error_rad);
-  if (alpha < 1e-15) return;
-  // At 180 deg the axis is undefined; any axis perpendicular to a is a shortest correction.
-  const Vec3 axis = sin_err > 1e-12 ? Vec3(cross / sin_err) : Vec3(a.unitOrthogonal());
+  const Vec3 cross = acc.cross(r_acc);                   // |a| sin(alpha) along the correction axis
+  const double sin2 = cross.squaredNorm();
+  const double cos_err = acc.dot(r_acc);  // |a| cos(alpha)
   const double k = acc_gain_.gain(dt, coeff_.tau_acc_14);
-  state_.q = (state_.q * exp_rotation_vector(k * alpha * axis)).normalized();  // eq. 10
+  Vec3 rotation;  // k * alpha * axis, eq. 10
+  if (cos_err > 0.0 && sin2 < coeff_.small_acc_error_tan2 * cos_err * cos_err) {
+    // The usual case, a small error below the clip: alpha * axis = (atan(t) / t) * cross / cos_err with
+    // t^2 = sin2 / cos_err^2: no square root, no atan2, one division.
+    const double inv_cos = 1.0 / cos_err;
+    rotation = (k * atan_over_t(sin2 * inv_cos * inv_cos) * inv_cos) * cross;
+  } else {
+    const double sin_err = std::sqrt(sin2);
+    // alpha = min(atan2(sin, cos), max) (robust form of the paper's arccos). A clipped error needs no atan2:
+    // for max < pi, alpha >= max exactly when sin(alpha - max) >= 0.
+    const double alpha =
+        coeff_.acc_clip_test && sin_err * coeff_.cos_max_acc_error - cos_err * coeff_.sin_max_acc_error >= 0.0
+            ? params_.max_acc_error_rad
+            : std::min(std::atan2(sin_err, cos_err), params_.max_acc_error_rad);
+    if (alpha < 1e-15) return;
+    // At 180 deg the axis is undefined; any axis perpendicular to a is a shortest correction.
+    const Vec3 axis = sin_err > 1e-12 * std::abs(cos_err) ? Vec3(cross / sin_err) : Vec3(acc.unitOrthogonal());
+    rotation = (k * alpha) * axis;
+  }
+  state_.q = state_.q * exp_rotation_vector(rotation);  // eq. 10 (normalised once per update)
   // Eq. 13 (b = -gyro_bias); not while initialising, when corrections remove the initial error, not a bias.
-  if (!state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_acc * k * alpha * axis;
+  if (!state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_acc * rotation;
 }
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
@@ -215,7 +256,7 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
                             ? static_cast<double>(since_mag) * 1e-9
                             : static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   const double k = state_.heading_known ? mag_gain_.gain(dt_mag, coeff_.tau_mag_14) : 1.0;
-  state_.q = (state_.q * exp_rotation_vector(k * alpha * r_acc)).normalized();  // eq. 12
+  state_.q = state_.q * exp_rotation_vector(k * alpha * r_acc);  // eq. 12 (normalised once per update)
   if (state_.heading_known && !state_.flags.initialising) {
     state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
   }
@@ -224,7 +265,7 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
 }
 
 UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
+  if (!s.finite() || !physically_possible(s)) return UpdateResult::kRejected;
   if (!state_.initialised) return initialise(s);
   if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
   if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) {
@@ -234,8 +275,6 @@ UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
     return r;
   }
 
-  const State before = state_;
-  const MagDisturbanceDetector detector_before = mag_detector_;
   const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = false;
@@ -244,19 +283,21 @@ UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
   // Strapdown prediction with the bias-corrected rate (eq. 14), exact for a rate constant over the step.
   if (s.has_gyr) {
     const Quat dq = exp_rotation_vector((s.gyr - state_.gyro_bias) * dt);
-    state_.q = (state_.q * dq).normalized();
-    if (coeff_.acc_lowpass) state_.q_gyr = (state_.q_gyr * dq).normalized();
+    state_.q = state_.q * dq;
+    if (coeff_.acc_lowpass) state_.q_gyr = renormalised(state_.q_gyr * dq);
   }
   if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
     correct_acc(coeff_.acc_lowpass ? lowpass_acc(s.acc, dt) : s.acc, dt);
   }
   if (s.has_mag) correct_mag(s);
+  state_.q = renormalised(state_.q);
   const double max_bias = params_.max_gyro_bias_rad_s;
   state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);
 
   if (!state_.q.coeffs().allFinite() || !state_.gyro_bias.allFinite()) {
-    state_ = before;  // extreme but finite input (e.g. 1e300 rad/s) must not leave NaN behind
-    mag_detector_ = detector_before;
+    // Cannot happen with physically possible input (every quantity stays bounded); should it ever, start
+    // afresh rather than pass NaN downstream.
+    reset();
     return UpdateResult::kRejected;
   }
   if (params_.rest_bias_lowpass != 0.0 && s.has_gyr) {

@@ -91,6 +91,8 @@ class SeelRuppinFilter final : public OrientationFilter {
     bool acc_clip_test = false;      ///< max_acc_error_rad < pi: clipping can be decided without atan2
     double sin_max_acc_error = 0.0;  ///< sin(max_acc_error_rad)
     double cos_max_acc_error = 0.0;  ///< cos(max_acc_error_rad)
+    /// tan^2 of the largest error the series path of correct_acc takes: min(0.1, tan(max_acc_error_rad))^2
+    double small_acc_error_tan2 = 0.0;
     bool acc_lowpass = false;        ///< acc_lowpass_tau_s > 0
     double acc_lowpass_fc_hz = 0.0;  ///< sqrt(2) / (2 pi tau): the Butterworth corner frequency
   };
@@ -116,6 +118,8 @@ class SeelRuppinFilter final : public OrientationFilter {
   explicit SeelRuppinFilter(const Params& params);
   SeelRuppinFilter() : SeelRuppinFilter(Params{}) {}
 
+  /// Besides the interface's rejections, a sample with a value no sensor can produce (|acc| > 1e4 m/s^2,
+  /// |gyr| > 1e4 rad/s, |mag| > 1e5 uT) is rejected without touching the state.
   UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
