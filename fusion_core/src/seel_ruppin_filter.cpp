@@ -30,6 +30,8 @@ constexpr ParamField<P> kParams[] = {
     {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
     {"mag_dip_leave_rad", &P::mag_dip_leave_rad},
     {"mag_min_clean_s", &P::mag_min_clean_s},
+    {"mag_reference_s", &P::mag_reference_s},
+    {"mag_max_rejection_s", &P::mag_max_rejection_s},
     {"rest_gyr_rad_s", &P::rest_gyr_rad_s},
     {"rest_acc_m_s2", &P::rest_acc_m_s2},
     {"rest_min_s", &P::rest_min_s},
@@ -53,6 +55,8 @@ const P& checked(const P& p) {
   require_positive(kName, p.max_gap_s, "max_gap_s");
   require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
   require_positive(kName, p.init_period_s, "init_period_s");
+  require_positive(kName, p.mag_reference_s, "mag_reference_s");
+  require_positive(kName, p.mag_max_rejection_s, "mag_max_rejection_s");
   for (const auto& [value, name] :
        {std::pair{p.mag_rejection, "mag_rejection"}, std::pair{p.rest_bias_lowpass, "rest_bias_lowpass"}}) {
     if (value != 0.0 && value != 1.0) {
@@ -113,10 +117,13 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params)
       rest_bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}) {
   coeff_.tau_acc_14 = 1.4 * params.tau_acc_s;
   coeff_.tau_mag_14 = 1.4 * params.tau_mag_s;
+  coeff_.tau_start_mag_14 = 1.4 * std::min(params.tau_mag_s, params.tau_acc_s);
   coeff_.bias_factor_acc = params.zeta * params.zeta / (160.0 * params.tau_acc_s);
   coeff_.bias_factor_mag = params.zeta * params.zeta / (160.0 * params.tau_mag_s);
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
   coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
+  coeff_.mag_reference_ns = seconds_to_ns(params.mag_reference_s);
+  coeff_.mag_max_rejection_ns = seconds_to_ns(params.mag_max_rejection_s);
   coeff_.acc_clip_test = params.max_acc_error_rad < std::numbers::pi;
   coeff_.sin_max_acc_error = std::sin(params.max_acc_error_rad);
   coeff_.cos_max_acc_error = std::cos(params.max_acc_error_rad);
@@ -196,8 +203,7 @@ UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
   state_.flags.reinitialised = true;
   state_.flags.mag_rejected = s.has_mag && !mag_usable;
   rest_.reset();
-  mag_detector_.reset();
-  if (mag_usable) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());
+  start_mag_reference(s.timestamp_ns);
   state_.flags.resting = rest_.update(s);
   return UpdateResult::kInitialised;
 }
@@ -219,11 +225,13 @@ void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
   } else {
     const double sin_err = std::sqrt(sin2);
     // alpha = min(atan2(sin, cos), max) (robust form of the paper's arccos). A clipped error needs no atan2:
-    // for max < pi, alpha >= max exactly when sin(alpha - max) >= 0.
+    // for max < pi, alpha >= max exactly when sin(alpha - max) >= 0. No clip while initialising: a start in
+    // motion can leave a large true error, which the clip would take tens of seconds to remove.
+    const bool clip = !state_.flags.initialising;
     const double alpha =
-        coeff_.acc_clip_test && sin_err * coeff_.cos_max_acc_error - cos_err * coeff_.sin_max_acc_error >= 0.0
+        clip && coeff_.acc_clip_test && sin_err * coeff_.cos_max_acc_error - cos_err * coeff_.sin_max_acc_error >= 0.0
             ? params_.max_acc_error_rad
-            : std::min(std::atan2(sin_err, cos_err), params_.max_acc_error_rad);
+            : (clip ? std::min(std::atan2(sin_err, cos_err), params_.max_acc_error_rad) : std::atan2(sin_err, cos_err));
     if (alpha < 1e-15) return;
     // At 180 deg the axis is undefined; any axis perpendicular to a is a shortest correction.
     const Vec3 axis = sin_err > 1e-12 * std::abs(cos_err) ? Vec3(cross / sin_err) : Vec3(acc.unitOrthogonal());
@@ -234,11 +242,57 @@ void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
   if (!state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_acc * rotation;
 }
 
+void SeelRuppinFilter::start_mag_reference(std::uint64_t t_ns) {
+  mag_detector_.reset();
+  state_.mag_learning = true;
+  state_.mag_learning_since_ns = t_ns;
+  state_.mag_norm_sum = state_.mag_dip_sum = state_.mag_learning_count = 0.0;
+  state_.mag_candidate_since_ns = 0;
+}
+
+bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up) {
+  if (state_.mag_learning) {
+    // Learn only once the start-up is over: the dip needs a converged vertical.
+    if (state_.flags.initialising) return false;
+    if (state_.mag_learning_count == 0.0) state_.mag_learning_since_ns = t_ns;
+    state_.mag_norm_sum += mag.norm();
+    state_.mag_dip_sum += MagDisturbanceDetector::dip_angle(mag, up);
+    state_.mag_learning_count += 1.0;
+    if (t_ns - state_.mag_learning_since_ns >= coeff_.mag_reference_ns) {
+      mag_detector_.set_reference(state_.mag_norm_sum / state_.mag_learning_count,
+                                  state_.mag_dip_sum / state_.mag_learning_count);
+      state_.mag_learning = false;
+    }
+    return false;
+  }
+  if (!mag_detector_.update(t_ns, mag, up)) {
+    state_.mag_candidate_since_ns = 0;
+    return false;
+  }
+  // Disturbed. A field that stays the same (within the leave band of the first reading of the run) for
+  // mag_max_rejection_s becomes the new reference; a field that keeps changing (a magnet moving with or near
+  // the sensor) never does.
+  const double norm = mag.norm();
+  const double dip = MagDisturbanceDetector::dip_angle(mag, up);
+  if (state_.mag_candidate_since_ns == 0 ||
+      std::abs(norm - state_.mag_candidate_norm) > params_.mag_norm_enter * state_.mag_candidate_norm ||
+      std::abs(dip - state_.mag_candidate_dip) > params_.mag_dip_enter_rad) {
+    state_.mag_candidate_norm = norm;
+    state_.mag_candidate_dip = dip;
+    state_.mag_candidate_since_ns = t_ns;
+  } else if (t_ns - state_.mag_candidate_since_ns >= coeff_.mag_max_rejection_ns) {
+    mag_detector_.reset();
+    mag_detector_.set_reference(state_.mag_candidate_norm, state_.mag_candidate_dip);
+    state_.mag_candidate_since_ns = 0;
+  }
+  return true;
+}
+
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
 // magnetometer turns the heading only.
 void SeelRuppinFilter::correct_mag(const ImuSample& s) {
   const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);
-  if (params_.mag_rejection != 0.0 && mag_detector_.update(s.timestamp_ns, s.mag, r_acc)) {
+  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, s.mag, r_acc)) {
     state_.flags.mag_rejected = true;
     return;
   }
@@ -255,7 +309,11 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
   const double dt_mag = (state_.last_mag_ns != 0 && since_mag <= coeff_.max_gap_ns)
                             ? static_cast<double>(since_mag) * 1e-9
                             : static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
-  const double k = state_.heading_known ? mag_gain_.gain(dt_mag, coeff_.tau_mag_14) : 1.0;
+  // During the start-up the heading converges as fast as the tilt: an initial heading taken with a wrong
+  // vertical (a start in motion) is wrong too.
+  const double k = !state_.heading_known       ? 1.0
+                   : state_.flags.initialising ? start_mag_gain_.gain(dt_mag, coeff_.tau_start_mag_14)
+                                               : mag_gain_.gain(dt_mag, coeff_.tau_mag_14);
   state_.q = state_.q * exp_rotation_vector(k * alpha * r_acc);  // eq. 12 (normalised once per update)
   if (state_.heading_known && !state_.flags.initialising) {
     state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;

@@ -7,28 +7,18 @@
 #include <random>
 
 #include "bsn/fusion/seel_ruppin_filter.hpp"
+#include "filter_test_util.hpp"
 
 namespace bsn::fusion {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
-const Vec3 kField(0, 49 * std::cos(64 * kDeg), -49 * std::sin(64 * kDeg));  // ENU, 49 uT, dip 64 deg
-
-std::uint64_t ns(double seconds) { return static_cast<std::uint64_t>(std::llround(seconds * 1e9)); }
-
-// A sample of a sensor at rest with true orientation q in the earth field `field`, gyro reading `gyr`.
-ImuSample static_sample(const Quat& q, double t, const Vec3& field = kField, const Vec3& gyr = Vec3::Zero()) {
-  ImuSample s;
-  s.timestamp_ns = ns(t);
-  s.acc = q.conjugate() * Vec3(0, 0, kGravity);
-  s.gyr = gyr;
-  s.mag = q.conjugate() * field;
-  return s;
-}
+using filter_test::kDeg;
+using filter_test::kField;
+using filter_test::ns;
+using filter_test::static_sample;
+using filter_test::wrap;
 
 Vec3 turned_about_up(const Vec3& v, double angle) { return Eigen::AngleAxisd(angle, Vec3::UnitZ()) * v; }
-
-double wrap(double a) { return std::remainder(a, 2 * std::numbers::pi); }
 
 // The paper's filter: no acceleration low-pass, no clipping of the accelerometer error, bias from the integral
 // action (eq. 13) only.
@@ -64,7 +54,10 @@ TEST(SeelRuppin, HeadingJumpTurnsOnlyYawWithHalfValueTimeTauMag) {
     for (double tau_mag : {1.0, 5.0, 10.0}) {
       for (double ts : {1.0 / 50, 1.0 / 100, 1.0 / 500}) {
         SeelRuppinFilter f(params_with(2.0, tau_mag, 2.0));
-        f.update(static_sample(q_true, 0));
+        // Settle past the start-up (faster heading gain there), then the field turns at t_dist = 0.
+        const double settle = f.params().init_period_s + 0.5;
+        for (double t = -settle; t < 0.0; t += ts) f.update(static_sample(q_true, t + settle));
+        f.update(static_sample(q_true, settle));
         const Vec3 turned = turned_about_up(kField, jump_deg * kDeg);
         // The true field heading turned by +jump: the estimate must turn by -jump to see it as north again.
         const double yaw_target = wrap(to_yaw_pitch_roll(q_true).yaw - jump_deg * kDeg);
@@ -72,7 +65,7 @@ TEST(SeelRuppin, HeadingJumpTurnsOnlyYawWithHalfValueTimeTauMag) {
         double half_time = -1.0, max_tilt_change = 0.0;
         for (int i = 1; i <= steps; ++i) {
           const double t = i * ts;
-          f.update(static_sample(q_true, t, turned));
+          f.update(static_sample(q_true, settle + t, turned));
           const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
           const YawPitchRoll truth = to_yaw_pitch_roll(q_true);
           max_tilt_change =
@@ -143,19 +136,17 @@ TEST(SeelRuppin, MagnetNearStaticSensorLeavesRollAndPitch) {
     SeelRuppinFilter f(p);
     const Quat q_true = from_yaw_pitch_roll({-70 * kDeg, 5 * kDeg, 10 * kDeg});
     const YawPitchRoll truth = to_yaw_pitch_roll(q_true);
-    std::mt19937 rng(7);
-    std::normal_distribution<double> acc_noise(0.0, 0.02), gyr_noise(0.0, 0.002), mag_noise(0.0, 0.2);
+    filter_test::WhiteNoise noise(7, 0.02, 0.002, 0.2);
     const Vec3 magnet_sensor(60, -35, 80);  // uT at closest approach, sensor frame
     double max_tilt = 0.0;
     for (int i = 0; i <= 2500; ++i) {
       const double t = i * 0.01;
       ImuSample s = static_sample(q_true, t);
+      if (i > 0) s = noise.add_to(s);  // an exact start: one noisy sample alone tilts the start by ~0.1 deg
       // Five approaches, each a smooth 2 s bump starting every 5 s.
       const double phase = std::fmod(t, 5.0);
       const double bump = phase < 2.0 ? std::pow(std::sin(std::numbers::pi * phase / 2.0), 2) : 0.0;
-      s.mag += bump * magnet_sensor + Vec3(mag_noise(rng), mag_noise(rng), mag_noise(rng));
-      s.acc += Vec3(acc_noise(rng), acc_noise(rng), acc_noise(rng));
-      s.gyr += Vec3(gyr_noise(rng), gyr_noise(rng), gyr_noise(rng));
+      s.mag += bump * magnet_sensor;
       f.update(s);
       const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
       max_tilt = std::max({max_tilt, std::abs(est.pitch - truth.pitch), std::abs(wrap(est.roll - truth.roll))});
@@ -167,11 +158,34 @@ TEST(SeelRuppin, MagnetNearStaticSensorLeavesRollAndPitch) {
 // The clipped accelerometer error (our addition for human motion): 0.3 s of a 3 g horizontal acceleration at
 // rest tilts the estimate by at most max_acc_error_rad / (1.4 tau_acc) * 0.3 s, while the paper's unclipped
 // correction follows the spike much further.
+// During the start-up the clip is off and the heading converges with tau_acc: a filter initialised from a
+// first sample taken under a 1 g horizontal acceleration (45 deg tilt error, and a heading taken with that
+// wrong vertical) has the right inclination by the end of the start-up, and the rest of the heading error
+// is gone within 5 tau_mag after it. With the clip the tilt error would shrink by at most
+// max_acc_error_rad / (1.4 tau_acc) per second (12 deg in 3 s).
+TEST(SeelRuppin, StartInMotionConvergesWithinTheStartUpPeriod) {
+  SeelRuppinFilter f;
+  ImuSample first = static_sample(Quat::Identity(), 0);
+  first.acc.x() += kGravity;
+  f.update(first);
+  ASSERT_GT(angle_between(f.orientation(), Quat::Identity()), 40 * kDeg);
+  const int end_of_start_up = static_cast<int>(f.params().init_period_s * 100);
+  int i = 1;
+  for (; i <= end_of_start_up; ++i) f.update(static_sample(Quat::Identity(), i * 0.01));
+  const Vec3 up_est = f.orientation().conjugate() * Vec3::UnitZ();
+  EXPECT_LT(std::acos(std::min(1.0, up_est.z())), 1 * kDeg);
+  for (const int end = i + static_cast<int>(5 * f.params().tau_mag_s * 100); i <= end; ++i) {
+    f.update(static_sample(Quat::Identity(), i * 0.01));
+  }
+  EXPECT_LT(angle_between(f.orientation(), Quat::Identity()), 1 * kDeg);
+}
+
 TEST(SeelRuppin, ClippedAccelerometerErrorBoundsTheEffectOfAnAccelerationSpike) {
   auto tilt_after_spike = [](const SeelRuppinFilter::Params& p) {
     SeelRuppinFilter f(p);
-    f.update(static_sample(Quat::Identity(), 0));
-    for (int i = 1; i <= 30; ++i) {
+    const int settled = static_cast<int>(p.init_period_s * 100) + 10;  // the clip acts after the start-up
+    for (int i = 0; i < settled; ++i) f.update(static_sample(Quat::Identity(), i * 0.01));
+    for (int i = settled; i < settled + 30; ++i) {
       ImuSample s = static_sample(Quat::Identity(), i * 0.01);
       s.acc.x() += 3 * kGravity;
       f.update(s);
@@ -220,22 +234,58 @@ TEST(SeelRuppin, AccelerationLowPassRemovesOscillatingExternalAcceleration) {
   EXPECT_GT(max_tilt_after_start(paper), 5 * bound);
 }
 
+// The detector's reference field is learned over mag_reference_s after the start-up; from then on a field of
+// another magnitude is rejected, and the magnetometer is trusted again only after mag_min_clean_s clean.
 TEST(SeelRuppin, FlagsMagneticDisturbanceWhenRejectionIsOn) {
   SeelRuppinFilter f;
   const Quat q = Quat::Identity();
-  f.update(static_sample(q, 0));
-  ImuSample s = static_sample(q, 0.01, kField * 1.5);
-  f.update(s);
+  const double ts = 0.01, learned = f.params().init_period_s + f.params().mag_reference_s + 0.1;
+  int i = 0;
+  for (; i * ts < learned; ++i) {
+    f.update(static_sample(q, i * ts));
+    EXPECT_FALSE(f.flags().mag_rejected) << i;
+  }
+  f.update(static_sample(q, i++ * ts, kField * 1.5));
   EXPECT_TRUE(f.flags().mag_rejected);
   const Quat before = f.orientation();
   // A disturbed field with a different heading must not turn the estimate.
-  for (int i = 2; i < 100; ++i) f.update(static_sample(q, i * 0.01, turned_about_up(kField * 1.5, 1.0)));
+  for (const int end = i + 100; i < end; ++i) f.update(static_sample(q, i * ts, turned_about_up(kField * 1.5, 1.0)));
   EXPECT_LT(angle_between(f.orientation(), before), 1e-9);
-  // Clean again only after mag_min_clean_s inside the inner band.
-  for (int i = 100; i < 150; ++i) f.update(static_sample(q, i * 0.01));
+  // Clean again only after mag_min_clean_s (1 s) inside the inner band.
+  for (const int end = i + 50; i < end; ++i) f.update(static_sample(q, i * ts));
   EXPECT_TRUE(f.flags().mag_rejected);
-  for (int i = 150; i < 250; ++i) f.update(static_sample(q, i * 0.01));
+  for (const int end = i + 100; i < end; ++i) f.update(static_sample(q, i * ts));
   EXPECT_FALSE(f.flags().mag_rejected);
+}
+
+// A disturbance that keeps the same field for mag_max_rejection_s becomes the new reference (a wrong reference
+// must not shut the magnetometer out for good), while one that keeps changing, like a magnet moving with the
+// sensor, stays rejected.
+TEST(SeelRuppin, SteadyNewFieldIsAdoptedChangingOneIsNot) {
+  const double ts = 0.01;
+  auto run = [&](bool steady) {
+    SeelRuppinFilter f;
+    const Quat q = Quat::Identity();
+    const double learned = f.params().init_period_s + f.params().mag_reference_s + 0.1;
+    double t = 0.0;
+    for (; t < learned; t += ts) f.update(static_sample(q, t));
+    const double until = t + f.params().mag_max_rejection_s + 10.0;
+    double rejected_until = t;
+    for (; t < until; t += ts) {
+      // 30 % stronger; the changing field swings its magnitude by +-20 % every 2 s.
+      const double scale = steady ? 1.3 : 1.3 + 0.2 * std::sin(std::numbers::pi * t);
+      f.update(static_sample(q, t, kField * scale));
+      if (f.flags().mag_rejected) rejected_until = t;
+    }
+    return std::pair{rejected_until - learned, f.flags().mag_rejected};
+  };
+  const auto [steady_rejected_for, steady_rejected_at_end] = run(true);
+  EXPECT_FALSE(steady_rejected_at_end);
+  // Adopted (and so clean) after mag_max_rejection_s.
+  EXPECT_NEAR(steady_rejected_for, SeelRuppinFilter::Params{}.mag_max_rejection_s, 0.1);
+  const auto [changing_rejected_for, changing_rejected_at_end] = run(false);
+  EXPECT_TRUE(changing_rejected_at_end);
+  (void)changing_rejected_for;
 }
 
 // A rotating sensor with consistent measurements: strapdown integration must keep the estimate on the truth,

@@ -72,22 +72,36 @@ class SeelRuppinFilter final : public OrientationFilter {
     double mag_dip_enter_rad = 0.14;
     double mag_dip_leave_rad = 0.07;
     double mag_min_clean_s = 1.0;
+    /// The detector's reference field (magnitude and dip) is the mean over this long after (re)initialisation,
+    /// with the estimated vertical, s; the magnetometer is used unchecked meanwhile. One reading would carry its
+    /// noise, and a start in motion its wrong vertical, into every later decision. Default 3 s.
+    double mag_reference_s = 3.0;
+    /// A disturbance whose field stays the same (magnitude and dip within the leave thresholds) for this long
+    /// is taken as the new reference field, s. Without it, a wrong reference (a start in motion or next to a
+    /// magnet) would shut the magnetometer out for good; a field that keeps changing, like that of a magnet
+    /// moving with or near the sensor, is never adopted. Default 20 s.
+    double mag_max_rejection_s = 20.0;
     /// Rest detection (see RestDetector): rad/s, m/s^2, s. Defaults 0.05, 0.5, 1.5.
     double rest_gyr_rad_s = 0.05;
     double rest_acc_m_s2 = 0.5;
     double rest_min_s = 1.5;
-    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
+    /// Start-up period after (re)initialisation, s: the filter reports `initialising`, corrects the tilt
+    /// without the clip and the heading with tau_acc if that is shorter than tau_mag, and learns no bias.
+    /// Default 3 s.
     double init_period_s = 3.0;
   };
 
   /// Quantities derived once from Params.
   struct Coefficients {
-    double tau_acc_14 = 0.0;       ///< 1.4 tau_acc, s
-    double tau_mag_14 = 0.0;       ///< 1.4 tau_mag, s
-    double bias_factor_acc = 0.0;  ///< zeta^2 / (160 tau_acc), 1/s
-    double bias_factor_mag = 0.0;  ///< zeta^2 / (160 tau_mag), 1/s
+    double tau_acc_14 = 0.0;        ///< 1.4 tau_acc, s
+    double tau_mag_14 = 0.0;        ///< 1.4 tau_mag, s
+    double tau_start_mag_14 = 0.0;  ///< 1.4 min(tau_mag, tau_acc): the heading correction during the start-up, s
+    double bias_factor_acc = 0.0;   ///< zeta^2 / (160 tau_acc), 1/s
+    double bias_factor_mag = 0.0;   ///< zeta^2 / (160 tau_mag), 1/s
     std::uint64_t max_gap_ns = 0;
     std::uint64_t init_period_ns = 0;
+    std::uint64_t mag_reference_ns = 0;
+    std::uint64_t mag_max_rejection_ns = 0;
     bool acc_clip_test = false;      ///< max_acc_error_rad < pi: clipping can be decided without atan2
     double sin_max_acc_error = 0.0;  ///< sin(max_acc_error_rad)
     double cos_max_acc_error = 0.0;  ///< cos(max_acc_error_rad)
@@ -111,6 +125,14 @@ class SeelRuppinFilter final : public OrientationFilter {
     std::uint64_t last_ns = 0;      ///< timestamp of the last used sample
     std::uint64_t last_mag_ns = 0;  ///< timestamp of the last used magnetometer reading
     std::uint64_t init_ns = 0;      ///< timestamp of the last (re)initialisation
+    bool mag_learning = true;       ///< averaging the reference field for the disturbance detector
+    std::uint64_t mag_learning_since_ns = 0;
+    double mag_norm_sum = 0.0;  ///< uT, over the readings of the learning period
+    double mag_dip_sum = 0.0;   ///< rad
+    double mag_learning_count = 0.0;
+    double mag_candidate_norm = 0.0;           ///< uT: the field of the current disturbance, a candidate reference
+    double mag_candidate_dip = 0.0;            ///< rad
+    std::uint64_t mag_candidate_since_ns = 0;  ///< since when the disturbance has stayed at the candidate; 0 = none
     FilterFlags flags;
   };
 
@@ -136,6 +158,10 @@ class SeelRuppinFilter final : public OrientationFilter {
   UpdateResult initialise(const ImuSample& s);
   void correct_acc(const Vec3& acc, double dt);
   void correct_mag(const ImuSample& s);
+  /// Starts learning the detector's reference field at t_ns.
+  void start_mag_reference(std::uint64_t t_ns);
+  /// The disturbance decision for one reading (false while the reference is being learned).
+  bool mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up);
 
   /// k_i = dt / (1.4 tau_i + dt) for the last dt seen (dt is nearly always the same from sample to sample).
   struct GainCache {
@@ -157,6 +183,7 @@ class SeelRuppinFilter final : public OrientationFilter {
   GainCache acc_gain_;
   LowPassCache acc_lp_;
   GainCache mag_gain_;
+  GainCache start_mag_gain_;
   State state_;
   RestDetector rest_;
   MagDisturbanceDetector mag_detector_;
