@@ -19,7 +19,7 @@ constexpr double kDeg = 180.0 / std::numbers::pi;
 // Measured 2026-11-22 with the defaults (mean total / inclination RMSE, deg).
 const std::map<std::string, double> kMeanTotalRmseBarDeg = {
     {"complementary", 14.4},  // 13.09 / 9.64: no bias estimate; fails on the fast-translation trial
-    {"seel_ruppin", 2.44},    // 2.21 / 0.61: the best; the project target is <= 2.5 / 0.6 (VQF: 2.51 / 0.61)
+    {"seel_ruppin", 2.45},    // 2.22 / 0.61: the best; the project target is <= 2.5 / 0.6 (VQF: 2.51 / 0.61)
     {"madgwick", 3.5},        // 3.19 / 1.67
     {"madgwick6", 4.7},       // 4.30 / 1.15
     {"iecf", 3.4},            // 3.06 / 2.02
@@ -32,7 +32,7 @@ const std::map<std::string, double> kMeanTotalRmseBarDeg = {
 
 // The best filter's figures, held at measured + 10 % (the project's target is 2.5 / 0.6 deg; the inclination,
 // 0.607 deg, is just above it).
-constexpr double kBestTotalBarDeg = 2.44;
+constexpr double kBestTotalBarDeg = 2.45;
 constexpr double kBestInclinationBarDeg = 0.67;
 
 TEST(BroadFilters, EveryFilterRunsEveryTrialUnderItsBar) {
