@@ -28,9 +28,27 @@ std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::l
 // Gain of a first-order low-pass with time constant tau for a step dt: exact for any dt.
 double step_gain(double dt, double inv_tau) { return 1.0 - std::exp(-dt * inv_tau); }
 
+// atan2(y, x) / y for y != 0. Without trigonometry for the small angles of per-sample
+// corrections (x > 0, (y/x)^2 < 0.01): atan(t)/t = 1 - t^2/3 + t^4/5 - ..., truncated after t^16 (error < 1e-17
+// relative); larger angles take atan2.
+double atan2_over_y(double y, double x) {
+  if (x > 0.0) {
+    const double inv_x = 1.0 / x;
+    const double t2 = y * y * inv_x * inv_x;
+    if (t2 < 1e-2) {
+      const double t4 = t2 * t2, t8 = t4 * t4;
+      const double low = (1.0 - t2 * (1.0 / 3)) + t4 * ((1.0 / 5) - t2 * (1.0 / 7));
+      const double high = ((1.0 / 9) - t2 * (1.0 / 11)) + t4 * ((1.0 / 13) - t2 * (1.0 / 15));
+      return inv_x * (low + t8 * (high + t8 * (1.0 / 17)));
+    }
+  }
+  return std::atan2(y, x) / y;
+}
+
 }  // namespace
 
-ComplementaryFilter::ComplementaryFilter(const Params& params) : params_(params) {
+ComplementaryFilter::ComplementaryFilter(const Params& params)
+    : params_(params), rest_({params.rest_gyr_rad_s, params.rest_acc_m_s2, params.rest_min_s}) {
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
   require_positive(kName, params.max_gap_s, "max_gap_s");
@@ -43,7 +61,6 @@ ComplementaryFilter::ComplementaryFilter(const Params& params) : params_(params)
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
-  coeff_.rest_min_ns = seconds_to_ns(params.rest_min_s);
   coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
 }
 
@@ -57,24 +74,12 @@ UpdateResult ComplementaryFilter::initialise(const ImuSample& s) {
   state_.initialised = true;
   state_.last_ns = s.timestamp_ns;
   state_.init_ns = s.timestamp_ns;
-  state_.still = false;
   state_.flags = FilterFlags{};
   state_.flags.initialising = true;
   state_.flags.reinitialised = true;
   state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  rest_.reset();
   return UpdateResult::kInitialised;
-}
-
-void ComplementaryFilter::update_rest(const ImuSample& s) {
-  const bool still_now = s.has_gyr && s.has_acc && s.gyr.norm() < params_.rest_gyr_rad_s &&
-                         std::abs(s.acc.norm() - kGravity) < params_.rest_acc_m_s2;
-  if (!still_now) {
-    state_.still = false;
-  } else if (!state_.still) {
-    state_.still = true;
-    state_.still_since_ns = s.timestamp_ns;
-  }
-  state_.flags.resting = state_.still && s.timestamp_ns - state_.still_since_ns >= coeff_.rest_min_ns;
 }
 
 UpdateResult ComplementaryFilter::update(const ImuSample& s) {
@@ -86,18 +91,29 @@ UpdateResult ComplementaryFilter::update(const ImuSample& s) {
   const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   state_.last_ns = s.timestamp_ns;
   state_.flags.reinitialised = false;
+  if (dt != state_.gain_dt_s) {  // dt is nearly always the same from sample to sample
+    state_.gain_dt_s = dt;
+    state_.gain_acc = step_gain(dt, coeff_.inv_tau_acc);
+    state_.gain_mag = step_gain(dt, coeff_.inv_tau_mag);
+  }
+  // Every factor below is a unit quaternion: one normalisation at the end suffices.
+  Quat q = state_.q;
 
   // Strapdown prediction: exact for a rate constant over the step (sensor-frame increment on the right).
-  if (s.has_gyr) state_.q = (state_.q * exp_rotation_vector(s.gyr * dt)).normalized();
+  if (s.has_gyr) q = q * exp_rotation_vector(s.gyr * dt);
 
-  // Tilt correction: turn the earth-frame image of the measured up direction towards earth z.
-  if (s.has_acc && std::abs(s.acc.norm() - kGravity) < params_.acc_rejection_m_s2) {
-    const Vec3 up_est = state_.q * s.acc.normalized();
-    const Vec3 axis = up_est.cross(Vec3::UnitZ());
-    const double angle = std::atan2(axis.norm(), up_est.z());
-    if (axis.norm() > 1e-12) {
-      const double k = step_gain(dt, coeff_.inv_tau_acc);
-      state_.q = (Quat(Eigen::AngleAxisd(k * angle, axis.normalized())) * state_.q).normalized();
+  // Tilt correction: turn the earth-frame image of the measured up direction towards earth z, by the fraction
+  // gain_acc of the angle between them, about their common perpendicular.
+  if (s.has_acc) {
+    const double acc_norm = s.acc.norm();
+    if (std::abs(acc_norm - kGravity) < params_.acc_rejection_m_s2) {
+      const Vec3 up_est = rotate(q, s.acc * (1.0 / acc_norm));
+      const Vec3 axis(up_est.y(), -up_est.x(), 0.0);  // up_est x earth z
+      const double axis_squared_norm = axis.squaredNorm();
+      if (axis_squared_norm > 1e-24) {
+        const double angle_over_sin = atan2_over_y(std::sqrt(axis_squared_norm), up_est.z());
+        q = exp_rotation_vector((state_.gain_acc * angle_over_sin) * axis) * q;
+      }
     }
   }
 
@@ -106,20 +122,21 @@ UpdateResult ComplementaryFilter::update(const ImuSample& s) {
   if (s.has_mag) {
     const double norm = s.mag.norm();
     if (state_.mag_ref_norm <= 0.0 && norm > 1e-9) state_.mag_ref_norm = norm;
-    const Vec3 m_earth = state_.q * s.mag;
-    const double horizontal = std::hypot(m_earth.x(), m_earth.y());
+    const Vec3 m_earth = rotate(q, s.mag);
+    const double horizontal_squared = m_earth.x() * m_earth.x() + m_earth.y() * m_earth.y();
     const bool disturbed = std::abs(norm - state_.mag_ref_norm) > params_.mag_norm_tolerance * state_.mag_ref_norm;
-    if (disturbed || horizontal < 1e-6 * norm || norm <= 1e-9) {
+    if (disturbed || horizontal_squared < 1e-12 * norm * norm || norm <= 1e-9) {
       state_.flags.mag_rejected = true;
     } else {
-      // Angle that takes the horizontal field onto earth y (north).
-      const double heading_error = std::atan2(m_earth.x(), m_earth.y());
-      const double k = step_gain(dt, coeff_.inv_tau_mag);
-      state_.q = (Quat(Eigen::AngleAxisd(k * heading_error, Vec3::UnitZ())) * state_.q).normalized();
+      // Angle that takes the horizontal field onto earth y (north): atan2(m_x, m_y).
+      const double heading_error = m_earth.x() != 0.0 ? m_earth.x() * atan2_over_y(m_earth.x(), m_earth.y())
+                                                      : std::atan2(m_earth.x(), m_earth.y());
+      q = exp_rotation_vector(Vec3(0.0, 0.0, state_.gain_mag * heading_error)) * q;
     }
   }
+  state_.q.coeffs() = q.coeffs() * inverse_sqrt_near_one(q.coeffs().squaredNorm());
 
-  update_rest(s);
+  state_.flags.resting = rest_.update(s);
   state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
 }

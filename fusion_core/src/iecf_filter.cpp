@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "bsn/fusion/filter_params.hpp"
 
@@ -59,6 +60,8 @@ IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
                      params.mag_min_clean_s}) {
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
   coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
+  // |gain e dt| <= gain (|e_a| + weight |e_m|) dt <= gain (dt + max_gap_s) <= 2 gain max_gap_s (unit crosses).
+  coeff_.correction_bounded = 2.0 * std::max(params.gain, params.initial_gain) * params.max_gap_s < 1e149;
 }
 
 double IecfFilter::gain_at(double since_init_s) const {
@@ -103,9 +106,17 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
   if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);  // the bias estimate is kept
 
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
-  const double gain = gain_at(static_cast<double>(s.timestamp_ns - state_.init_ns) * 1e-9);
-  const MagDisturbanceDetector detector_before = mag_detector_;
+  const std::uint64_t dt_ns = s.timestamp_ns - state_.last_ns;
+  const double dt = static_cast<double>(dt_ns) * 1e-9;
+  const std::uint64_t since_init_ns = s.timestamp_ns - state_.init_ns;
+  const double gain =
+      since_init_ns >= coeff_.init_period_ns ? params_.gain : gain_at(static_cast<double>(since_init_ns) * 1e-9);
+  const Vec3 rate = !s.has_gyr ? Vec3::Zero() : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
+  const Vec3 gyro_step = rate * dt;
+  // The step can only overflow (and the sample be rejected) for an absurd rate or gain: only then is the detector
+  // saved, to be restored on rejection.
+  std::optional<MagDisturbanceDetector> detector_before;
+  if (!(gyro_step.squaredNorm() < 1e300) || !coeff_.correction_bounded) detector_before = mag_detector_;
   Quat q = state_.q;
   bool mag_used = false;
   bool mag_rejected = false;
@@ -113,26 +124,28 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   Vec3 error = Vec3::Zero();
   const double acc_squared_norm = s.has_acc ? s.acc.squaredNorm() : 0.0;
   if (acc_squared_norm > 1e-12) {
-    const Vec3 a = s.acc / std::sqrt(acc_squared_norm);
+    const Vec3 a = s.acc * (1.0 / std::sqrt(acc_squared_norm));
     const Vec3 up_est = earth_axis_in_sensor(q, 2);
     error += a.cross(up_est);  // e_a: measured x predicted up
-    // mag_usable(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|.
+    // mag_usable(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, a unit.
     const double mag_squared_norm = use_magnetometer_ && s.has_mag ? s.mag.squaredNorm() : 0.0;
-    if (mag_squared_norm > 1e-18 && (s.mag / std::sqrt(mag_squared_norm)).cross(a).squaredNorm() > 1e-6) {
+    const Vec3 m_cross_a = s.mag.cross(a);
+    const double m_cross_a_squared_norm = m_cross_a.squaredNorm();
+    if (mag_squared_norm > 1e-18 && m_cross_a_squared_norm > 1e-6 * mag_squared_norm) {
       if (params_.mag_rejection != 0.0 && mag_detector_.update(s.timestamp_ns, s.mag, up_est)) {
         mag_rejected = true;
       } else if (!state_.heading_known) {
         q = orientation_from_acc_mag(s.acc, s.mag);  // first heading after a start without magnetometer
         mag_used = true;
       } else {
-        const Vec3 east_measured = s.mag.cross(a).normalized();  // north x up = east (ENU x)
+        const Vec3 east_measured = m_cross_a * (1.0 / std::sqrt(m_cross_a_squared_norm));  // north x up = east
         const Vec3 east_predicted = earth_axis_in_sensor(q, 0);
         // Weighted by the time since the last used reading, so the heading gain holds per second with a
-        // magnetometer slower than the IMU.
+        // magnetometer slower than the IMU (1 exactly when the last sample had one).
         const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
-        const double weight = (state_.last_mag_ns != 0 && since_mag <= coeff_.max_gap_ns)
-                                  ? static_cast<double>(since_mag) * 1e-9 / dt
-                                  : 1.0;
+        const double weight = (state_.last_mag_ns == 0 || since_mag > coeff_.max_gap_ns) ? 1.0
+                              : since_mag == dt_ns                                       ? 1.0
+                                                   : static_cast<double>(since_mag) * 1e-9 / dt;
         error += weight * east_measured.cross(east_predicted);  // e_m (virtual east, section 2.1.2)
         mag_used = true;
       }
@@ -141,10 +154,10 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
     }
   }
 
-  const Vec3 rate = !s.has_gyr ? Vec3::Zero() : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
-  q = (q * exp_rotation_vector((rate + gain * error) * dt)).normalized();  // eqs. 14-15, exact for the step
-  if (!q.coeffs().allFinite()) {
-    mag_detector_ = detector_before;  // extreme finite input: keep the state
+  q = q * exp_rotation_vector(gyro_step + (gain * dt) * error);   // eqs. 14-15, exact for the step
+  q.coeffs() *= inverse_sqrt_near_one(q.coeffs().squaredNorm());  // a product of unit quaternions
+  if (!std::isfinite(q.w() + q.x() + q.y() + q.z())) {            // normalised: finite sum = finite components
+    if (detector_before) mag_detector_ = *detector_before;        // extreme finite input: keep the state
     return UpdateResult::kRejected;
   }
 
@@ -158,7 +171,7 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   state_.flags.mag_rejected = mag_rejected;
   if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = since_init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
 }
 

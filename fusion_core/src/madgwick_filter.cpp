@@ -38,37 +38,6 @@ bool mag_usable(const ImuSample& s) {
   return s.has_mag && s.has_acc && s.mag.norm() > 1e-9 && s.acc.norm() > 1e-6 &&
          s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
 }
-
-// mag_usable() for a sample whose channels are present and already normalised (|m x a| > 1e-3 |m| |a|).
-bool mag_usable_units(double mag_squared_norm, double acc_squared_norm, const Vec3& mag_unit, const Vec3& acc_unit) {
-  return mag_squared_norm > 1e-18 && acc_squared_norm > 1e-12 && mag_unit.cross(acc_unit).squaredNorm() > 1e-6;
-}
-
-// The accelerometer part of gradient(), J(q, up)^T f(q, up, a), written out: the terms of the general form that
-// multiply a zero component of up = (0, 0, 1) vanish exactly (Madgwick eqs. 25-26).
-Eigen::Vector4d gravity_gradient(const Quat& q, const Vec3& a) {
-  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
-  const double f0 = 2 * (x * z - w * y) - a.x();
-  const double f1 = 2 * (y * z + w * x) - a.y();
-  const double f2 = 1 - 2 * (x * x + y * y) - a.z();
-  return Eigen::Vector4d(-2 * y * f0 + 2 * x * f1, 2 * z * f0 + 2 * w * f1 - 4 * x * f2,
-                         -2 * w * f0 + 2 * z * f1 - 4 * y * f2, 2 * x * f0 + 2 * y * f1);
-}
-
-// The magnetometer part of gradient(), J(q, b)^T f(q, b, m), written out for b = (0, b1, b2) (the terms with
-// b0 = 0 vanish exactly; Madgwick eqs. 29-30 in ENU).
-Eigen::Vector4d field_gradient(const Quat& q, const Vec3& b, const Vec3& m) {
-  const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
-  const double b1 = b.y(), b2 = b.z();
-  const double f0 = 2 * (x * y + w * z) * b1 + 2 * (x * z - w * y) * b2 - m.x();
-  const double f1 = (1 - 2 * (x * x + z * z)) * b1 + 2 * (y * z + w * x) * b2 - m.y();
-  const double f2 = 2 * (y * z - w * x) * b1 + (1 - 2 * (x * x + y * y)) * b2 - m.z();
-  return Eigen::Vector4d(2 * (z * b1 - y * b2) * f0 + 2 * (x * b2) * f1 + 2 * (-x * b1) * f2,
-                         2 * (y * b1 + z * b2) * f0 + 2 * (-2 * x * b1 + w * b2) * f1 + 2 * (-w * b1 - 2 * x * b2) * f2,
-                         2 * (x * b1 - w * b2) * f0 + 2 * (z * b2) * f1 + 2 * (z * b1 - 2 * y * b2) * f2,
-                         2 * (w * b1 + x * b2) * f0 + 2 * (-2 * z * b1 + y * b2) * f1 + 2 * (y * b1) * f2);
-}
-
 }  // namespace
 
 MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
@@ -137,7 +106,7 @@ UpdateResult MadgwickFilter::initialise(const ImuSample& s) {
   state_.flags.initialising = true;
   state_.flags.reinitialised = true;
   state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
-  state_.held_mag = with_mag && use_magnetometer_ ? Vec3(s.mag.normalized()) : Vec3::Zero();
+  state_.held_mag = with_mag && use_magnetometer_ ? s.mag : Vec3::Zero();
   state_.held_mag_ns = with_mag && use_magnetometer_ ? s.timestamp_ns : 0;
   rest_.reset();
   state_.flags.resting = rest_.update(s);
@@ -152,6 +121,9 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
 
   const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
   Quat q = state_.q;
+  // A held reading is used by a sample without magnetometer within max_gap_s of the last usable one.
+  const bool hold = use_magnetometer_ && !s.has_mag && state_.held_mag_ns != 0 &&
+                    s.timestamp_ns - state_.held_mag_ns <= coeff_.max_gap_ns;
   Vec3 held_mag = state_.held_mag;
   // Gyro part, integrated exactly for a rate constant over the step (the paper's Euler step of
   // q_dot = q (x) (0, w) / 2 is its first-order approximation).
@@ -159,35 +131,78 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
     const Vec3 rate = params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
     const Quat increment = exp_rotation_vector(rate * dt);
     q = q * increment;
-    if (use_magnetometer_) held_mag = increment.conjugate() * held_mag;  // a fixed earth vector, turned sensor
+    if (hold) held_mag = rotate(increment.conjugate(), held_mag);  // a fixed earth vector, turned sensor
   }
-  // Each norm once: the unit vectors serve both the usability test and the gradient.
+  // Squared norms only: the field part of the gradient is computed on the raw reading and scaled by 1/|m|^2
+  // (it is bilinear in the field), so the magnetometer needs no square root.
   const double acc_squared_norm = s.has_acc ? s.acc.squaredNorm() : 0.0;
   const bool acc_usable = acc_squared_norm > 1e-12;
-  const Vec3 acc_unit = acc_usable ? Vec3(s.acc / std::sqrt(acc_squared_norm)) : Vec3::Zero();
+  const Vec3 acc_unit = acc_usable ? Vec3(s.acc * (1.0 / std::sqrt(acc_squared_norm))) : Vec3::Zero();
   bool with_mag = false;
   if (use_magnetometer_ && s.has_mag && acc_usable) {
+    // mag_usable(): |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, with a unit.
     const double mag_squared_norm = s.mag.squaredNorm();
-    const Vec3 mag_unit = s.mag / std::sqrt(mag_squared_norm);
-    with_mag = mag_usable_units(mag_squared_norm, acc_squared_norm, mag_unit, acc_unit);
-    if (with_mag) held_mag = mag_unit;
+    with_mag = mag_squared_norm > 1e-18 && s.mag.cross(acc_unit).squaredNorm() > 1e-6 * mag_squared_norm;
+    if (with_mag) held_mag = s.mag;
   }
-  const bool use_mag = with_mag || (use_magnetometer_ && !s.has_mag && state_.held_mag_ns != 0 &&
-                                    s.timestamp_ns - state_.held_mag_ns <= coeff_.max_gap_ns);
+  const bool use_mag = with_mag || hold;
   if (acc_usable) {
-    Eigen::Vector4d grad = gravity_gradient(q, acc_unit);  // = gradient(q, acc_unit, held_mag, use_mag)
+    // The gradient J(q, d)^T f of both objectives, with the Jacobian linear in the reference d: J(q, e_z) has the
+    // rows 2 (-y, z, -w, x), 2 (x, w, z, y), 2 (0, -2x, -2y, 0) as (w, x, y, z), and J(q, e_y) the rows 2 (z, y, x, w),
+    // 2 (0, -2x, 0, -2z), 2 (-x, -w, z, y) (Madgwick eqs. 25-26 and 29-30 in ENU). So the gradient is
+    // sum_i c_i J_z.row(i) + d_i J_y.row(i) with c = f_a + b2 f_m, d = b1 f_m. The common factor 2 is dropped: only
+    // the direction of the gradient is used.
+    const double w = q.w(), x = q.x(), y = q.y(), z = q.z();
+    const double r20 = 2 * (x * z - w * y), r21 = 2 * (y * z + w * x), r22 = 1 - 2 * (x * x + y * y);
+    // Accelerometer residual f_a = R^T e_z - a.
+    double c0 = r20 - acc_unit.x(), c1 = r21 - acc_unit.y(), c2 = r22 - acc_unit.z();
+    double d0 = 0.0, d1 = 0.0, d2 = 0.0;
     if (use_mag) {
-      const Vec3 b = magnetic_reference(q, held_mag);
-      grad += field_gradient(q, b, held_mag);
+      // Field residual f_m = R^T b - m for b = (0, |h_xy|, h_z), h = R m, on the raw m: J(q, b)^T f_m is bilinear
+      // in (b, f_m), so it is scaled by 1/|m|^2.
+      const Vec3& m = held_mag;
+      const double r00 = 1 - 2 * (y * y + z * z), r01 = 2 * (x * y - w * z), r02 = 2 * (x * z + w * y);
+      const double r10 = 2 * (x * y + w * z), r11 = 1 - 2 * (x * x + z * z), r12 = 2 * (y * z - w * x);
+      const double hx = r00 * m.x() + r01 * m.y() + r02 * m.z();
+      const double hy = r10 * m.x() + r11 * m.y() + r12 * m.z();
+      const double b1 = std::sqrt(hx * hx + hy * hy);
+      const double b2 = r20 * m.x() + r21 * m.y() + r22 * m.z();
+      const double e0 = r10 * b1 + r20 * b2 - m.x();
+      const double e1 = r11 * b1 + r21 * b2 - m.y();
+      const double e2 = r12 * b1 + r22 * b2 - m.z();
+      const double inv_m2 = 1.0 / m.squaredNorm();
+      const double k1 = inv_m2 * b1, k2 = inv_m2 * b2;
+      c0 += k2 * e0;
+      c1 += k2 * e1;
+      c2 += k2 * e2;
+      d0 = k1 * e0;
+      d1 = k1 * e1;
+      d2 = k1 * e2;
     }
-    const double norm = grad.norm();
-    if (norm > 1e-12) {
-      const Eigen::Vector4d step = -params_.beta * dt / norm * grad;      // normalised gradient step
-      q.coeffs() += Eigen::Vector4d(step[1], step[2], step[3], step[0]);  // Eigen stores (x, y, z, w)
+    const double g0 = x * (c1 - d2) - y * c0 + z * d0;
+    const double g1 = z * c0 + w * (c1 - d2) - 2 * x * (c2 + d1) + y * d0;
+    const double g2 = z * (c1 + d2) - w * c0 - 2 * y * c2 + x * d0;
+    const double g3 = x * c0 + y * (c1 + d2) + w * d0 - 2 * z * d1;
+    const double grad_squared_norm = g0 * g0 + g1 * g1 + g2 * g2 + g3 * g3;
+    if (grad_squared_norm > 0.25e-24) {  // |J^T f| > 1e-12 with the factor 2
+      // Normalised gradient step of beta dt, and the norm of the result without a second square root:
+      // |q + s g|^2 = |q|^2 + 2 s (q . g) + (beta dt)^2 for s = -beta dt / |g|. sqrt and 1/|g|^2 run in parallel.
+      const double beta_dt = params_.beta * dt;
+      const double step = -beta_dt * std::sqrt(grad_squared_norm) * (1.0 / grad_squared_norm);
+      const double q_dot_g = w * g0 + x * g1 + y * g2 + z * g3;
+      const double squared_norm = (w * w + x * x + y * y + z * z) + 2 * step * q_dot_g + beta_dt * beta_dt;
+      q = Quat(w + step * g0, x + step * g1, y + step * g2, z + step * g3);
+      // The formula is exact to rounding near 1 (the usual small step); far from it (beta dt ~ 1) it could cancel.
+      q.coeffs() *=
+          inverse_sqrt_near_one(std::abs(squared_norm - 1.0) < 1e-3 ? squared_norm : q.coeffs().squaredNorm());
+    } else {
+      q.coeffs() *= inverse_sqrt_near_one(q.coeffs().squaredNorm());
     }
+  } else {
+    q.coeffs() *= inverse_sqrt_near_one(q.coeffs().squaredNorm());
   }
-  q.normalize();
-  if (!q.coeffs().allFinite()) return UpdateResult::kRejected;  // extreme finite input: keep the state
+  // Extreme finite input: keep the state. q is normalised, so its sum is finite exactly when every component is.
+  if (!std::isfinite(q.w() + q.x() + q.y() + q.z())) return UpdateResult::kRejected;
 
   state_.q = q;
   state_.held_mag = held_mag;

@@ -29,10 +29,41 @@ double MagDisturbanceDetector::dip_angle(const Vec3& m, const Vec3& up) {
   return std::asin(std::clamp(-m.dot(up) / norm, -1.0, 1.0));
 }
 
+namespace {
+
+// Bound on sin(dip) equivalent to dip > angle (greater = true) or dip < angle (greater = false), for a dip in
+// [-pi/2, pi/2]: beyond +-pi/2 the comparison always or never holds, which +-2 reproduces (|sin(dip)| <= 1).
+double sine_bound(double angle, bool greater) {
+  constexpr double kHalfPi = 1.5707963267948966;
+  if (greater ? angle >= kHalfPi : angle > kHalfPi) return 2.0;
+  if (greater ? angle < -kHalfPi : angle <= -kHalfPi) return -2.0;
+  return std::sin(angle);
+}
+
+}  // namespace
+
 void MagDisturbanceDetector::set_reference(double norm_uT, double dip_rad) {
   state_.reference_known = norm_uT > 0.0 && std::isfinite(norm_uT) && std::isfinite(dip_rad);
   state_.ref_norm = state_.reference_known ? norm_uT : 0.0;
   state_.ref_dip = state_.reference_known ? dip_rad : 0.0;
+  const double ref = state_.ref_norm, dip = state_.ref_dip;
+  bounds_.norm_enter_low = ref * (1.0 - params_.norm_enter);
+  bounds_.norm_enter_high = ref * (1.0 + params_.norm_enter);
+  bounds_.norm_leave_low = ref * (1.0 - params_.norm_leave);
+  bounds_.norm_leave_high = ref * (1.0 + params_.norm_leave);
+  bounds_.sin_enter_low = sine_bound(dip - params_.dip_enter_rad, false);
+  bounds_.sin_enter_high = sine_bound(dip + params_.dip_enter_rad, true);
+  bounds_.sin_leave_low = sine_bound(dip - params_.dip_leave_rad, true);
+  bounds_.sin_leave_high = sine_bound(dip + params_.dip_leave_rad, false);
+}
+
+double MagDisturbanceDetector::last_norm_deviation() const {
+  return state_.reference_known ? std::abs(state_.last_norm - state_.ref_norm) / state_.ref_norm : 0.0;
+}
+
+double MagDisturbanceDetector::last_dip_deviation() const {
+  if (!(state_.last_norm > 0.0)) return 0.0;
+  return std::abs(std::asin(std::clamp(state_.last_down / state_.last_norm, -1.0, 1.0)) - state_.ref_dip);
 }
 
 bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up) {
@@ -42,16 +73,17 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     state_.inside_leave_band = false;
     return true;
   }
-  const double dip = dip_angle(mag, up);
-  if (!state_.reference_known) set_reference(norm, dip);
+  const double down = -mag.dot(up);  // |m| sin(dip)
+  if (!state_.reference_known) set_reference(norm, dip_angle(mag, up));
+  state_.last_norm = norm;
+  state_.last_down = down;
 
-  state_.last_norm_deviation = std::abs(norm - state_.ref_norm) / state_.ref_norm;
-  state_.last_dip_deviation = std::abs(dip - state_.ref_dip);
-  const bool outside_enter_band =
-      state_.last_norm_deviation > params_.norm_enter || state_.last_dip_deviation > params_.dip_enter_rad;
-  const bool inside_leave_band =
-      state_.last_norm_deviation < params_.norm_leave && state_.last_dip_deviation < params_.dip_leave_rad;
-
+  // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as sin(dip) = down / |m|
+  // compared against the sines of the band limits (multiplied through by |m| > 0).
+  const bool outside_enter_band = norm > bounds_.norm_enter_high || norm < bounds_.norm_enter_low ||
+                                  down > bounds_.sin_enter_high * norm || down < bounds_.sin_enter_low * norm;
+  const bool inside_leave_band = norm < bounds_.norm_leave_high && norm > bounds_.norm_leave_low &&
+                                 down < bounds_.sin_leave_high * norm && down > bounds_.sin_leave_low * norm;
   if (!inside_leave_band) {
     state_.inside_leave_band = false;
   } else if (!state_.inside_leave_band || t_ns < state_.inside_since_ns) {

@@ -18,19 +18,4 @@ RestDetector::RestDetector(const Params& params) : params_(params) {
   acc_high_sq_ = acc_high * acc_high;
 }
 
-bool RestDetector::update(const ImuSample& s) {
-  // |gyr| < threshold and | |acc| - g | < threshold, compared squared (no square roots per sample).
-  const double acc_sq = s.acc.squaredNorm();
-  const bool still_now = s.has_gyr && s.has_acc && s.gyr.squaredNorm() < gyr_threshold_sq_ && acc_sq > acc_low_sq_ &&
-                         acc_sq < acc_high_sq_;
-  if (!still_now) {
-    state_.still = false;
-  } else if (!state_.still || s.timestamp_ns < state_.still_since_ns) {
-    state_.still = true;
-    state_.still_since_ns = s.timestamp_ns;
-  }
-  state_.resting = state_.still && s.timestamp_ns - state_.still_since_ns >= min_duration_ns_;
-  return state_.resting;
-}
-
 }  // namespace bsn::fusion

@@ -10,23 +10,15 @@
 #include "bsn/fusion/mag_disturbance_detector.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rest_detector.hpp"
+#include "filter_test_util.hpp"
 
 namespace bsn::fusion {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
-const Vec3 kField(0, 49 * std::cos(64 * kDeg), -49 * std::sin(64 * kDeg));  // ENU, 49 uT, dip 64 deg
-
-std::uint64_t ns(double seconds) { return static_cast<std::uint64_t>(std::llround(seconds * 1e9)); }
-
-ImuSample static_sample(const Quat& q, double t, const Vec3& field = kField, const Vec3& gyr = Vec3::Zero()) {
-  ImuSample s;
-  s.timestamp_ns = ns(t);
-  s.acc = q.conjugate() * Vec3(0, 0, kGravity);
-  s.gyr = gyr;
-  s.mag = q.conjugate() * field;
-  return s;
-}
+using filter_test::kDeg;
+using filter_test::kField;
+using filter_test::ns;
+using filter_test::static_sample;
 
 // ---------------------------------------------------------------------------------------------------------------
 // RestDetector
@@ -134,6 +126,43 @@ TEST(MagDisturbanceDetector, CleanAgainOnlyAfterTheMinimumDurationInsideTheInner
   EXPECT_NEAR(steeper.norm(), kField.norm(), 1e-9);
   EXPECT_TRUE(d.update(ns(2.04), steeper, Vec3::UnitZ()));
   EXPECT_THROW(MagDisturbanceDetector({0.05, 0.10, 0.14, 0.07, 1.0}), std::invalid_argument);
+}
+
+// The dip bands are tested on sines against precomputed bounds (no asin per sample): the decisions must be those
+// of the angles, on both sides of each threshold, also where a band limit lies beyond the vertical.
+TEST(MagDisturbanceDetector, DipDecisionsAreThoseOfTheAngles) {
+  for (double ref_dip_deg : {64.0, -30.0, 85.0}) {
+    const Vec3 reference = Eigen::AngleAxisd((64.0 - ref_dip_deg) * kDeg, Vec3::UnitX()) * kField;
+    ASSERT_NEAR(MagDisturbanceDetector::dip_angle(reference, Vec3::UnitZ()), ref_dip_deg * kDeg, 1e-12);
+    for (double change_deg = -20.0; change_deg <= 20.0; change_deg += 0.25) {
+      const double new_dip_deg = ref_dip_deg + change_deg;
+      if (std::abs(new_dip_deg) > 90.0) continue;  // not a dip
+      MagDisturbanceDetector d;                    // enter 0.14 rad, leave 0.07 rad
+      d.update(0, reference, Vec3::UnitZ());
+      const Vec3 turned = Eigen::AngleAxisd(-change_deg * kDeg, Vec3::UnitX()) * reference;
+      const bool disturbed = d.update(ns(0.01), turned, Vec3::UnitZ());
+      EXPECT_EQ(disturbed, std::abs(change_deg * kDeg) > 0.14) << ref_dip_deg << " " << change_deg;
+      EXPECT_EQ(d.state().inside_leave_band, std::abs(change_deg * kDeg) < 0.07) << ref_dip_deg << " " << change_deg;
+      EXPECT_NEAR(d.last_dip_deviation(), std::abs(change_deg) * kDeg, 1e-9);
+      EXPECT_NEAR(d.last_norm_deviation(), 0.0, 1e-12);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Inline helpers of rotation.hpp that the filters use per sample.
+
+TEST(RotationHelpers, InverseSqrtNearOneAndRotateMatchTheirDefinitions) {
+  for (double n2 : {1.0, 1.0 + 1e-12, 1.0 - 3e-7, 1.0 + 4e-4, 1.0 - 9.99e-4, 1.0 + 1e-3, 0.5, 2.0, 1e-20, 1e20}) {
+    EXPECT_NEAR(inverse_sqrt_near_one(n2) * std::sqrt(n2), 1.0, 4e-16) << n2;
+  }
+  std::mt19937 rng(3);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int i = 0; i < 100; ++i) {
+    const Quat q = Quat(n(rng), n(rng), n(rng), n(rng)).normalized();
+    const Vec3 v(n(rng), n(rng), n(rng));
+    EXPECT_LT((rotate(q, v) - q * v).norm(), 1e-14 * v.norm());
+  }
 }
 
 // ---------------------------------------------------------------------------------------------------------------

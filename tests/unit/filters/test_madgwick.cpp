@@ -8,25 +8,15 @@
 #include <random>
 
 #include "bsn/fusion/madgwick_filter.hpp"
+#include "filter_test_util.hpp"
 
 namespace bsn::fusion {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
-const Vec3 kField(0, 49 * std::cos(64 * kDeg), -49 * std::sin(64 * kDeg));  // ENU, 49 uT, dip 64 deg
-
-std::uint64_t ns(double seconds) { return static_cast<std::uint64_t>(std::llround(seconds * 1e9)); }
-
-ImuSample static_sample(const Quat& q, double t, const Vec3& field = kField) {
-  ImuSample s;
-  s.timestamp_ns = ns(t);
-  s.acc = q.conjugate() * Vec3(0, 0, kGravity);
-  s.gyr = Vec3::Zero();
-  s.mag = q.conjugate() * field;
-  return s;
-}
-
-double wrap(double a) { return std::remainder(a, 2 * std::numbers::pi); }
+using filter_test::kDeg;
+using filter_test::kField;
+using filter_test::static_sample;
+using filter_test::wrap;
 
 Quat random_orientation(std::mt19937& rng) {
   std::normal_distribution<double> n(0.0, 1.0);
@@ -160,6 +150,23 @@ TEST(Madgwick, SixAxisVariantIgnoresTheMagnetometer) {
   for (int i = 1; i <= 500; ++i) f->update(static_sample(Quat::Identity(), i * 0.01, turned));
   EXPECT_LT(angle_between(f->orientation(), Quat::Identity()), 1e-9);
   EXPECT_FALSE(f->flags().mag_rejected);
+}
+
+// The norm after a gradient step is computed from a formula near 1; a step of beta dt ~ 1 (beta = 100 rad/s at
+// 100 Hz) must still leave a unit quaternion.
+TEST(Madgwick, HugeStepsStayUnit) {
+  for (double beta : {50.0, 100.0, 200.0, 1e4}) {
+    MadgwickFilter::Params p;
+    p.beta = beta;
+    MadgwickFilter f(p, true);
+    std::mt19937 rng(8);
+    const Quat q_true = random_orientation(rng);
+    f.update(static_sample(Quat::Identity(), 0));
+    for (int i = 1; i <= 300; ++i) {
+      ASSERT_EQ(f.update(static_sample(q_true, i * 0.01)), UpdateResult::kUpdated);
+      ASSERT_NEAR(f.orientation().norm(), 1.0, 1e-12) << beta << " " << i;
+    }
+  }
 }
 
 TEST(Madgwick, FactoryChecksParameters) {

@@ -6,6 +6,7 @@
 #include <string_view>
 
 #include "bsn/fusion/orientation_filter.hpp"
+#include "bsn/fusion/rest_detector.hpp"
 
 namespace bsn::fusion {
 
@@ -41,18 +42,18 @@ class ComplementaryFilter final : public OrientationFilter {
     double inv_tau_acc = 0.0;  ///< 1/tau_acc, 1/s; gain per sample is 1 - exp(-dt/tau)
     double inv_tau_mag = 0.0;  ///< 1/tau_mag, 1/s
     std::uint64_t max_gap_ns = 0;
-    std::uint64_t rest_min_ns = 0;
     std::uint64_t init_period_ns = 0;
   };
 
   struct State {
     Quat q = Quat::Identity();  ///< sensor-to-earth
     bool initialised = false;
-    std::uint64_t last_ns = 0;         ///< timestamp of the last used sample
-    std::uint64_t init_ns = 0;         ///< timestamp of the last (re)initialisation
-    std::uint64_t still_since_ns = 0;  ///< start of the current still period
-    bool still = false;
+    std::uint64_t last_ns = 0;  ///< timestamp of the last used sample
+    std::uint64_t init_ns = 0;  ///< timestamp of the last (re)initialisation
     double mag_ref_norm = 0.0;  ///< |mag| at initialisation, uT; 0 = not known yet
+    double gain_dt_s = -1.0;    ///< step for which gain_acc and gain_mag hold (dt rarely changes), s
+    double gain_acc = 0.0;      ///< 1 - exp(-dt / tau_acc)
+    double gain_mag = 0.0;      ///< 1 - exp(-dt / tau_mag)
     FilterFlags flags;
   };
 
@@ -65,7 +66,10 @@ class ComplementaryFilter final : public OrientationFilter {
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return Vec3::Zero(); }
   bool initialised() const override { return state_.initialised; }
-  void reset() override { state_ = State{}; }
+  void reset() override {
+    state_ = State{};
+    rest_.reset();
+  }
   std::string_view name() const override { return "complementary"; }
 
   const Params& params() const { return params_; }
@@ -73,11 +77,11 @@ class ComplementaryFilter final : public OrientationFilter {
 
  private:
   UpdateResult initialise(const ImuSample& s);
-  void update_rest(const ImuSample& s);
 
   Params params_;
   Coefficients coeff_;
   State state_;
+  RestDetector rest_;
 };
 
 /// Factory entry: "complementary" with the Params fields as parameter names.

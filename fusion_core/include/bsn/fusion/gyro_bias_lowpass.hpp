@@ -7,6 +7,7 @@
 // implement exactly that: d(w_bias)/dt = 2 pi f_c * p * (w - w_bias), discretised exactly for any dt.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 
 #include "bsn/fusion/rotation.hpp"
@@ -38,7 +39,23 @@ class GyroBiasLowPass {
 
   /// Feeds the raw measured rate of a sample at t_ns, dt seconds after the previous one (dt <= 0 or
   /// non-finite input changes nothing but the still timer).
-  void update(std::uint64_t t_ns, double dt, const Vec3& gyr);
+  EIGEN_ALWAYS_INLINE void update(std::uint64_t t_ns, double dt, const Vec3& gyr) {
+    // Always inlined: every filter of the family calls it once per sample.
+    // Every component below omega_min; NaN and Inf fail the comparison, so non-finite input is never still.
+    const double limit = params_.omega_min_rad_s;
+    const bool still_now = std::abs(gyr.x()) < limit && std::abs(gyr.y()) < limit && std::abs(gyr.z()) < limit;
+    if (!still_now) {
+      state_.still = false;
+    } else if (!state_.still || t_ns < state_.still_since_ns) {
+      state_.still = true;
+      state_.still_since_ns = t_ns;
+    }
+    state_.updating = state_.still && t_ns - state_.still_since_ns > min_static_ns_;
+    if (state_.updating && dt > 0.0 && std::isfinite(dt)) {
+      if (dt != cached_dt_) cache_gain(dt);  // dt is nearly always the same from sample to sample
+      state_.bias += cached_gain_ * (gyr - state_.bias);
+    }
+  }
   const Vec3& bias() const { return state_.bias; }
   /// Overwrites the estimate (a filter that also estimates the bias by other means keeps this one in step).
   void set_bias(const Vec3& bias) { state_.bias = bias; }
@@ -47,6 +64,9 @@ class GyroBiasLowPass {
   const State& state() const { return state_; }
 
  private:
+  /// Sets cached_gain_ = 1 - exp(-omega_c dt), the exact step of the first-order low-pass, for dt.
+  void cache_gain(double dt);
+
   Params params_;
   double omega_c_ = 0.0;  ///< 2 pi f_c, rad/s
   std::uint64_t min_static_ns_ = 0;

@@ -57,6 +57,9 @@ class IecfFilter final : public OrientationFilter {
   struct Coefficients {
     std::uint64_t max_gap_ns = 0;
     std::uint64_t init_period_ns = 0;
+    /// The correction gain * e * dt stays below 1e150 rad per step: with a gyro step below that too, the update
+    /// cannot overflow, and the detector need not be saved for a rollback.
+    bool correction_bounded = true;
   };
 
   struct State {

@@ -58,7 +58,8 @@ class MadgwickFilter final : public OrientationFilter {
   struct State {
     Quat q = Quat::Identity();  ///< sensor-to-earth
     bool initialised = false;
-    Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, unit, turned into the current sensor frame
+    Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, uT; turned into the current sensor frame
+                                    ///< while a sample without magnetometer uses it
     std::uint64_t held_mag_ns = 0;  ///< its timestamp; 0 = none
     std::uint64_t last_ns = 0;
     std::uint64_t init_ns = 0;

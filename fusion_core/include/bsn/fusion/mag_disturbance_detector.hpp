@@ -5,6 +5,8 @@
 //   - disturbed as soon as |m| or the dip leaves the outer band (enter thresholds);
 //   - clean again only after both have stayed inside the inner band (leave thresholds) for min_clean_s.
 // The reference magnitude and dip are the first ones seen after reset(), unless set explicitly.
+// Per sample it takes one square root and no trigonometry: the dip thresholds are compared as sines
+// (asin is monotonic), against bounds derived once when the reference is set.
 #pragma once
 
 #include <cstdint>
@@ -35,8 +37,8 @@ class MagDisturbanceDetector {
     bool disturbed = false;
     bool inside_leave_band = false;     ///< the last sample was inside the inner band
     std::uint64_t inside_since_ns = 0;  ///< start of the current stay inside the inner band
-    double last_norm_deviation = 0.0;   ///< | |m| - ref | / ref of the last sample
-    double last_dip_deviation = 0.0;    ///< |dip - ref_dip| of the last sample, rad
+    double last_norm = 0.0;             ///< |m| of the last sample, uT
+    double last_down = 0.0;             ///< -(m . up) of the last sample, uT: |m| sin(dip)
   };
 
   /// Throws std::invalid_argument on a non-positive or non-finite parameter, or a leave threshold above its
@@ -56,12 +58,24 @@ class MagDisturbanceDetector {
   void set_reference(double norm_uT, double dip_rad);
 
   bool disturbed() const { return state_.disturbed; }
+  /// | |m| - ref | / ref of the last sample (computed on demand).
+  double last_norm_deviation() const;
+  /// |dip - ref_dip| of the last sample, rad (computed on demand).
+  double last_dip_deviation() const;
   void reset() { state_ = State{}; }
   const State& state() const { return state_; }
 
  private:
+  /// Bounds of the two bands for the current reference: |m| in uT, and sin(dip) (2 or -2 where the angle
+  /// bound lies beyond +-90 deg, so that the comparison always or never holds as it would for the angle).
+  struct Bounds {
+    double norm_enter_low = 0.0, norm_enter_high = 0.0, norm_leave_low = 0.0, norm_leave_high = 0.0;
+    double sin_enter_low = 0.0, sin_enter_high = 0.0, sin_leave_low = 0.0, sin_leave_high = 0.0;
+  };
+
   Params params_;
   std::uint64_t min_clean_ns_ = 0;
+  Bounds bounds_;
   State state_;
 };
 

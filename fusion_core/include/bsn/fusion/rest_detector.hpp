@@ -32,7 +32,21 @@ class RestDetector {
 
   /// Feeds one (finite) sample; returns resting(). A sample without gyro or accelerometer ends a still period
   /// (rest cannot be confirmed without both).
-  bool update(const ImuSample& s);
+  bool update(const ImuSample& s) {
+    // |gyr| < threshold and | |acc| - g | < threshold, compared squared (no square roots per sample). Inline:
+    // every filter calls it once per sample.
+    const double acc_sq = s.acc.squaredNorm();
+    const bool still_now = s.has_gyr && s.has_acc && s.gyr.squaredNorm() < gyr_threshold_sq_ && acc_sq > acc_low_sq_ &&
+                           acc_sq < acc_high_sq_;
+    if (!still_now) {
+      state_.still = false;
+    } else if (!state_.still || s.timestamp_ns < state_.still_since_ns) {
+      state_.still = true;
+      state_.still_since_ns = s.timestamp_ns;
+    }
+    state_.resting = state_.still && s.timestamp_ns - state_.still_since_ns >= min_duration_ns_;
+    return state_.resting;
+  }
   bool resting() const { return state_.resting; }
   void reset() { state_ = State{}; }
   const State& state() const { return state_; }

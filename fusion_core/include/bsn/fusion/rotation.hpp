@@ -90,6 +90,23 @@ inline Vec3 earth_axis_in_sensor(const Quat& q, int axis) {
   }
 }
 
+/// q * v * conj(q) for a unit q, written out and always inlined (Eigen's q * v, and this function too, end up as
+/// out-of-line calls in hot loops otherwise): v + 2w (u x v) + 2 u x (u x v) with u the vector part of q.
+EIGEN_ALWAYS_INLINE Vec3 rotate(const Quat& q, const Vec3& v) {
+  const Vec3 u = q.vec();
+  const Vec3 t = 2.0 * u.cross(v);
+  return v + q.w() * t + u.cross(t);
+}
+
+/// 1 / sqrt(n2). Without square root or division when n2 is within 1e-3 of 1, as the squared norm of a unit
+/// quaternion after a small step is: the binomial series to the fifth power then errs by less than 3e-19.
+inline double inverse_sqrt_near_one(double n2) {
+  const double d = n2 - 1.0;
+  if (!(std::abs(d) < 1e-3)) return 1.0 / std::sqrt(n2);
+  const double d2 = d * d;  // Estrin's scheme: a shorter dependency chain than Horner's
+  return (1.0 - (1.0 / 2) * d) + d2 * ((3.0 / 8) - (5.0 / 16) * d) + d2 * d2 * ((35.0 / 128) - (63.0 / 256) * d);
+}
+
 /// Sensor-to-earth orientation whose earth z is along the specific force (up) and whose earth y is along the
 /// horizontal part of the magnetic field (north). Correct for any heading. Requires acc and mag not parallel.
 Quat orientation_from_acc_mag(const Vec3& acc, const Vec3& mag);
