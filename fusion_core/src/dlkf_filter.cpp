@@ -1,5 +1,6 @@
 #include "bsn/fusion/dlkf_filter.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -14,7 +15,7 @@ constexpr const char* kName = "dlkf";
 using kalman_support::skew;
 using Mat3 = Eigen::Matrix3d;
 using dlkf::Mat6;
-using Mat63 = Eigen::Matrix<double, 6, 3>;
+using dlkf::Vec6;
 
 // Keeps Q positive definite along v, where a rotation does not move the vector.
 constexpr double kMinProcessVariance = 1e-14;
@@ -55,15 +56,36 @@ Mat3 sensor_frame_turn(const Vec3& w, double dt) {
   double s1, c1;
   if (a2 < 0.05 * 0.05) {
     // Taylor series, truncation error below 1e-16 at a = 0.05 rad per step.
-    s1 = 1.0 - a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)));
-    c1 = 0.5 * (1.0 - a2 / 12.0 * (1.0 - a2 / 30.0 * (1.0 - a2 / 56.0 * (1.0 - a2 / 90.0))));
+    // Products with constant reciprocals: a division by a constant is not folded.
+    s1 = 1.0 - a2 * (1.0 / 6.0) * (1.0 - a2 * (1.0 / 20.0) * (1.0 - a2 * (1.0 / 42.0) * (1.0 - a2 * (1.0 / 72.0))));
+    c1 = 0.5 *
+         (1.0 - a2 * (1.0 / 12.0) * (1.0 - a2 * (1.0 / 30.0) * (1.0 - a2 * (1.0 / 56.0) * (1.0 - a2 * (1.0 / 90.0)))));
   } else {
     const double a = std::sqrt(a2);
     s1 = std::sin(a) / a;
     c1 = (1.0 - std::cos(a)) / a2;
   }
-  const Mat3 vx = skew(v);
-  return Mat3::Identity() - s1 * vx + c1 * vx * vx;
+  // [v x]^2 = v v^T - a^2 I.
+  Mat3 turn = c1 * v * v.transpose() - s1 * skew(v);
+  turn.diagonal().array() += 1.0 - c1 * a2;
+  return turn;
+}
+
+// TRIAD for a unit up vector t1 (DlkfFilter::triad). Measured triad (eq. 2) in the sensor frame: t1 = up,
+// t2 = up x field, t3 = t1 x t2.
+Quat triad_from_unit_up(const Vec3& t1, const Vec3& field) {
+  const Vec3 t2 = kalman_support::unit(Vec3(t1.cross(field)));
+  const Vec3 t3 = t1.cross(t2);
+  // The reference triad (eq. 1) in the earth frame is constant: [z, z x y, z x (z x y)] = [z, -x, -y]. So
+  // A^T = M_ref M_meas^T (eq. 3, sensor-to-earth) has the rows -t2^T, -t3^T, t1^T.
+  Mat3 m;
+  m.row(0) = -t2.transpose();
+  m.row(1) = -t3.transpose();
+  m.row(2) = t1.transpose();
+  // m is orthonormal, so the quaternion is unit up to rounding: only the sign is made canonical (w >= 0).
+  Quat q(m);
+  if (q.w() < 0.0) q.coeffs() = -q.coeffs();
+  return q;
 }
 
 }  // namespace
@@ -83,41 +105,44 @@ void SplitKalman::initialise(const Vec3& y, double var_noise, double var_disturb
 void SplitKalman::predict(const Mat3& turn, double gyro_var_dt, double c, double var_disturbance) {
   x.head<3>() = turn * x.head<3>();
   x.tail<3>() *= c;
-  const Mat3 vx = skew(x.head<3>());
-  // P <- F P F^T + Q with F = diag(turn, c I), block by block.
-  Mat6 f_p;
-  f_p.topRows<3>() = turn * p.topRows<3>();
-  f_p.bottomRows<3>() = c * p.bottomRows<3>();
-  p.leftCols<3>() = f_p.leftCols<3>() * turn.transpose();
-  p.rightCols<3>() = c * f_p.rightCols<3>();
-  p.topLeftCorner<3, 3>() += gyro_var_dt * vx * vx.transpose() + kMinProcessVariance * Mat3::Identity();
+  // P <- F P F^T + Q with F = diag(turn, c I), block by block on P = [A B; B^T C]. The gyro term of Q is
+  // gyro_var_dt [v x][v x]^T = gyro_var_dt (|v|^2 I - v v^T). A is computed on its lower triangle and mirrored,
+  // so P stays exactly symmetric (correct() keeps it so too) and needs no symmetrisation.
+  const Vec3 v = x.head<3>();
+  const Mat3 ta = turn * p.topLeftCorner<3, 3>();
+  const double diagonal_noise = gyro_var_dt * v.squaredNorm() + kMinProcessVariance;
+  for (int j = 0; j < 3; ++j) {
+    for (int i = j; i < 3; ++i) {
+      const double a_ij = ta.row(i).dot(turn.row(j)) - gyro_var_dt * v(i) * v(j) + (i == j ? diagonal_noise : 0.0);
+      p(i, j) = a_ij;
+      p(j, i) = a_ij;
+    }
+  }
+  const Mat3 b_next = c * (turn * p.topRightCorner<3, 3>());
+  p.topRightCorner<3, 3>() = b_next;
+  p.bottomLeftCorner<3, 3>() = b_next.transpose();
+  p.bottomRightCorner<3, 3>() *= c * c;
   p.bottomRightCorner<3, 3>().diagonal().array() += var_disturbance * (1.0 - c * c) + kMinProcessVariance;
 }
 
 void SplitKalman::correct(const Vec3& y, double var_noise) {
-  // H = [I I]: H P H^T = Pvv + Pvd + Pdv + Pdd, P H^T = [Pvv + Pvd; Pdv + Pdd].
-  const Mat63 pht = p.leftCols<3>() + p.rightCols<3>();
-  const Mat3 s = pht.topRows<3>() + pht.bottomRows<3>() + var_noise * Mat3::Identity();
-  const Mat63 k = pht * s.inverse();
-  x += k * (y - x.head<3>() - x.tail<3>());
-  // Joseph form A P A^T + R K K^T with A = I - K H, using H = [I I]: A M = M - K (H M), M A^T = M - (M H^T) K^T.
-  const Mat6 ap = p - k * (p.topRows<3>() + p.bottomRows<3>());
-  p = ap - (ap.leftCols<3>() + ap.rightCols<3>()) * k.transpose() + var_noise * k * k.transpose();
+  // H = [I I] and R = var_noise I (diagonal): the three axes are processed one at a time, each a scalar
+  // measurement with h = e_i + e_(i+3). This is the batch update up to rounding, without inverting S. Each axis:
+  // P <- P - u u^T with u = P h^T / sqrt(s), exactly symmetric.
+  for (int i = 0; i < 3; ++i) {
+    const Vec6 ph = p.col(i) + p.col(i + 3);
+    const double s = ph(i) + ph(i + 3) + var_noise;
+    const double inv_sqrt_s = 1.0 / std::sqrt(s);
+    const Vec6 u = inv_sqrt_s * ph;
+    x += (inv_sqrt_s * (y(i) - x(i) - x(i + 3))) * u;
+    p.noalias() -= u * u.transpose();
+  }
 }
 
 }  // namespace dlkf
 
 Quat DlkfFilter::triad(const Vec3& up, const Vec3& field) {
-  // Reference triad (eq. 1) in the earth frame, v1 = up, v2 = north; measured triad (eq. 2) in the sensor frame.
-  Mat3 m_ref, m_meas;
-  m_ref.col(0) = Vec3::UnitZ();
-  m_ref.col(1) = Vec3::UnitZ().cross(Vec3::UnitY());
-  m_ref.col(2) = m_ref.col(0).cross(m_ref.col(1));
-  m_meas.col(0) = up.normalized();
-  m_meas.col(1) = m_meas.col(0).cross(field).normalized();
-  m_meas.col(2) = m_meas.col(0).cross(m_meas.col(1));
-  // Eq. 3: A = M_meas M_ref^T maps earth to sensor; the sensor-to-earth rotation is its transpose.
-  return canonical(Quat(Mat3(m_ref * m_meas.transpose())));
+  return triad_from_unit_up(kalman_support::unit(up), field);
 }
 
 DlkfFilter::DlkfFilter(const Params& params)
@@ -148,6 +173,9 @@ DlkfFilter::DlkfFilter(const Params& params)
   coeff_.var_dist = params.sigma_mag_disturbance * params.sigma_mag_disturbance;
   coeff_.inv_tau_ext = 1.0 / params.tau_ext_acc_s;
   coeff_.inv_tau_dist = 1.0 / params.tau_mag_disturbance_s;
+  const double acc_low = std::max(kGravity - params.acc_rejection_m_s2, 0.0);
+  coeff_.acc_accept_min2 = acc_low * acc_low;
+  coeff_.acc_accept_max2 = (kGravity + params.acc_rejection_m_s2) * (kGravity + params.acc_rejection_m_s2);
   coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
   coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
   coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
@@ -163,7 +191,8 @@ void DlkfFilter::initialise_magnetic(const Vec3& mag) {
   state_.magnetic.initialise(mag, coeff_.var_m, coeff_.var_dist);
   state_.have_mag = true;
   state_.mag_ref_norm = mag.norm();
-  state_.mag_ref_dip = kalman_support::dip_angle(mag, state_.gravity.vector().normalized());
+  state_.mag_ref_sin_dip = kalman_support::sin_dip(mag, state_.gravity.vector().normalized(), state_.mag_ref_norm);
+  state_.mag_ref_cos_dip = std::sqrt(1.0 - state_.mag_ref_sin_dip * state_.mag_ref_sin_dip);
 }
 
 UpdateResult DlkfFilter::initialise(const ImuSample& s) {
@@ -216,15 +245,19 @@ UpdateResult DlkfFilter::update(const ImuSample& s) {
 
   // Filter 1: gravity and external acceleration.
   state_.gravity.predict(turn, gyro_var_dt, state_.decay_ext, coeff_.var_ext);
+  // | |acc| - g | <= acc_rejection_m_s2, compared squared (no square root).
+  const double acc2 = s.acc.squaredNorm();
   if (s.has_acc &&
-      (params_.acc_rejection_m_s2 == 0.0 || std::abs(s.acc.norm() - kGravity) <= params_.acc_rejection_m_s2)) {
+      (params_.acc_rejection_m_s2 == 0.0 || (acc2 >= coeff_.acc_accept_min2 && acc2 <= coeff_.acc_accept_max2))) {
     state_.gravity.correct(s.acc, coeff_.var_a);
   }
 
   // Filter 2: geomagnetic field and magnetic disturbance.
   state_.magnetic.predict(turn, gyro_var_dt, state_.decay_dist, coeff_.var_dist);
   state_.flags.mag_rejected = false;
-  const Vec3 up = state_.gravity.vector().normalized();
+  const Vec3 g = state_.gravity.vector();
+  const double g_norm = g.norm();
+  const Vec3 up = g_norm > 0.0 ? Vec3(g * (1.0 / g_norm)) : g;
   if (s.has_mag) {
     if (!state_.have_mag) {
       if (kalman_support::acc_mag_usable(up, s.mag)) {
@@ -235,8 +268,11 @@ UpdateResult DlkfFilter::update(const ImuSample& s) {
     } else {
       bool use = true;
       if (params_.mag_rejection != 0.0) {
-        const double scale = r_adaption_.update(s.timestamp_ns, s.mag.norm() / state_.mag_ref_norm,
-                                                kalman_support::dip_angle(s.mag, up) - state_.mag_ref_dip);
+        const double mag_norm = s.mag.norm();
+        const double scale = r_adaption_.update_from_cosine(
+            s.timestamp_ns, mag_norm / state_.mag_ref_norm,
+            kalman_support::cos_dip_deviation(kalman_support::sin_dip(s.mag, up, mag_norm), state_.mag_ref_sin_dip,
+                                              state_.mag_ref_cos_dip));
         use = std::isfinite(scale);
       }
       if (use) {
@@ -246,12 +282,13 @@ UpdateResult DlkfFilter::update(const ImuSample& s) {
       }
     }
   }
-  kalman_support::condition_covariance(state_.gravity.p, 1e-18, 1e8);
-  kalman_support::condition_covariance(state_.magnetic.p, 1e-18, 1e8);
+  // Both covariances are exactly symmetric by construction: only their variances need clamping.
+  kalman_support::clamp_variances(state_.gravity.p, 1e-18, 1e8);
+  kalman_support::clamp_variances(state_.magnetic.p, 1e-18, 1e8);
 
   // TRIAD, gravity dominant. A degenerate pair (field along gravity, or a vanished vector) keeps the last q.
-  const Vec3 g = state_.gravity.vector(), h = state_.magnetic.vector();
-  if (g.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad(g, h);
+  const Vec3 h = state_.magnetic.vector();
+  if (up.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad_from_unit_up(up, h);
 
   state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
                                                      params_.rest_acc_m_s2, coeff_.rest_min_ns);

@@ -114,7 +114,9 @@ EkfFilter::Mat6 EkfFilter::error_covariance() const {
 
 void EkfFilter::set_reference(const Vec3& mag_earth) {
   state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
-  state_.h_ref_dip = kalman_support::dip_angle(state_.h_ref, Vec3::UnitZ());
+  state_.h_ref_norm = state_.h_ref.norm();
+  state_.h_ref_sin_dip = kalman_support::sin_dip(state_.h_ref, Vec3::UnitZ(), state_.h_ref_norm);
+  state_.h_ref_cos_dip = std::sqrt(1.0 - state_.h_ref_sin_dip * state_.h_ref_sin_dip);
 }
 
 UpdateResult EkfFilter::initialise(const ImuSample& s) {
@@ -144,41 +146,24 @@ UpdateResult EkfFilter::initialise(const ImuSample& s) {
 template <int M>
 void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
                         const Eigen::Matrix<double, M, 1>& variances) {
-  // H = [h_q 0] and P = [A B; B^T C] (A 4x4, C 3x3): every product is done on the blocks.
-  using MatM = Eigen::Matrix<double, M, M>;
-  const Mat4 a = state_.p.topLeftCorner<4, 4>();
-  const Eigen::Matrix<double, 4, 3> b = state_.p.topRightCorner<4, 3>();
-  const Mat3 c = state_.p.bottomRightCorner<3, 3>();
-  Eigen::Matrix<double, 7, M> pht;  // P H^T
-  pht.template topRows<4>() = a * h_q.transpose();
-  pht.template bottomRows<3>() = b.transpose() * h_q.transpose();
-  MatM s = h_q * pht.template topRows<4>();
-  s.diagonal() += variances;
-  // S is symmetric positive definite (R > 0): Cholesky, or the closed-form inverse for 3x3.
-  Eigen::Matrix<double, 7, M> k;
-  if constexpr (M == 3) {
-    k = pht * s.inverse();
-  } else {
-    k = s.llt().solve(pht.transpose()).transpose();
+  // R is diagonal, so the M rows are processed one at a time against the same linearisation: this is the batch
+  // Kalman update exactly (up to rounding) without forming or inverting S. H = [h_q 0] touches only the
+  // quaternion columns of P. Each row: P <- P - (P h^T)(P h^T)^T / s, symmetric by construction.
+  using Vec7 = Eigen::Matrix<double, 7, 1>;
+  Vec7 dx = Vec7::Zero();
+  for (int i = 0; i < M; ++i) {
+    const Eigen::Vector4d h = h_q.row(i).transpose();
+    const Vec7 ph = state_.p.template leftCols<4>() * h;
+    const double s = h.dot(ph.template head<4>()) + variances(i);
+    const Vec7 k = ph * (1.0 / s);
+    dx += k * (residual(i) - h.dot(dx.template head<4>()));
+    state_.p.noalias() -= k * ph.transpose();
   }
-  const Eigen::Matrix<double, 7, 1> dx = k * residual;
   const Eigen::Vector4d q = as_vector(state_.q) + dx.head<4>();
   state_.bias += dx.tail<3>();
-  // Joseph form (I - K H) P (I - K H)^T + K R K^T with I - K H = [G 0; L I], G = I - K_q h_q, L = -K_b h_q.
-  const auto k_q = k.template topRows<4>();
-  const auto k_b = k.template bottomRows<3>();
-  const Mat4 g = Mat4::Identity() - k_q * h_q;
-  const Eigen::Matrix<double, 3, 4> l = -k_b * h_q;
-  const Mat4 ga = g * a;
-  const Eigen::Matrix<double, 7, M> kr = k * variances.asDiagonal();
-  state_.p.topLeftCorner<4, 4>() = ga * g.transpose() + kr.template topRows<4>() * k_q.transpose();
-  const Eigen::Matrix<double, 4, 3> top_right = ga * l.transpose() + g * b + kr.template topRows<4>() * k_b.transpose();
-  state_.p.topRightCorner<4, 3>() = top_right;
-  state_.p.bottomLeftCorner<3, 4>() = top_right.transpose();
-  state_.p.bottomRightCorner<3, 3>() =
-      (l * a + b.transpose()) * l.transpose() + l * b + c + kr.template bottomRows<3>() * k_b.transpose();
   const double n = q.norm();
-  state_.q = n > 1e-9 ? Quat(q(0) / n, q(1) / n, q(2) / n, q(3) / n) : state_.q;
+  const double inv_n = 1.0 / n;
+  state_.q = n > 1e-9 ? Quat(q(0) * inv_n, q(1) * inv_n, q(2) * inv_n, q(3) * inv_n) : state_.q;
 }
 
 UpdateResult EkfFilter::update(const ImuSample& s) {
@@ -199,7 +184,7 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
   state_.gyr_prev = s.gyr;
   state_.have_gyr_prev = s.has_gyr;
   const Quat dq = exp_rotation_vector(w * dt);
-  state_.q = (state_.q * dq).normalized();
+  state_.q = state_.q * dq;  // unit up to rounding; the correction (or the end of update) normalises it
   const Mat43 x = xi(state_.q);
   {
     // P <- F P F^T + Q_d on blocks: F = [R Y; 0 I] with R = right(dq), Y = -dt/2 Xi(q); P = [A B; B^T C].
@@ -209,8 +194,18 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
     const Mat43 b = state_.p.topRightCorner<4, 3>();
     const Mat3 c = state_.p.bottomRightCorner<3, 3>();
     const Mat43 top_right = rot * b + y * c;
-    state_.p.topLeftCorner<4, 4>() = (rot * a + y * b.transpose()) * rot.transpose() + top_right * y.transpose() +
-                                     (0.25 * params_.sigma_g * params_.sigma_g * dt) * x * x.transpose();
+    const Mat4 n_top = rot * a + y * b.transpose();
+    // A' = n_top R^T + top_right Y^T + (sigma_g^2 dt / 4) Xi Xi^T, and Y = -dt/2 Xi folds the noise term into the
+    // second product: A' = n_top R^T + (top_right - sigma_g^2 / 2 Xi) Y^T. It is symmetric: the lower triangle is
+    // computed and mirrored.
+    const Mat43 g = top_right - (0.5 * params_.sigma_g * params_.sigma_g) * x;
+    for (int j = 0; j < 4; ++j) {
+      for (int i = j; i < 4; ++i) {
+        const double a_ij = n_top.row(i).dot(rot.row(j)) + g.row(i).dot(y.row(j));
+        state_.p(i, j) = a_ij;
+        state_.p(j, i) = a_ij;
+      }
+    }
     state_.p.topRightCorner<4, 3>() = top_right;
     state_.p.bottomLeftCorner<3, 4>() = top_right.transpose();
     state_.p.bottomRightCorner<3, 3>().diagonal().array() += params_.sigma_bg * params_.sigma_bg * dt;
@@ -219,7 +214,9 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
   // Magnetometer: usable unless the R-adaption sets its variance to infinity.
   bool use_mag = false;
   state_.flags.mag_rejected = false;
-  const Vec3 up = state_.q.conjugate() * Vec3::UnitZ();
+  // One rotation matrix for every earth-to-sensor rotation below: its transpose maps earth to sensor.
+  Mat3 to_sensor = state_.q.toRotationMatrix().transpose();
+  Vec3 up = to_sensor.col(2);
   if (s.has_mag) {
     if (state_.h_ref.isZero()) {
       // Initialised without a magnetometer: the first usable one sets the heading and the reference.
@@ -228,27 +225,32 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
         state_.q =
             (Quat(Eigen::AngleAxisd(std::atan2(m_earth.x(), m_earth.y()), Vec3::UnitZ())) * state_.q).normalized();
         set_reference(state_.q * s.mag);
+        to_sensor = state_.q.toRotationMatrix().transpose();
+        up = to_sensor.col(2);
       } else {
         state_.flags.mag_rejected = true;
       }
     } else {
       use_mag = true;
       if (params_.mag_rejection != 0.0) {
-        const double scale = r_adaption_.update(s.timestamp_ns, s.mag.norm() / state_.h_ref.norm(),
-                                                kalman_support::dip_angle(s.mag, up) - state_.h_ref_dip);
+        const double mag_norm = s.mag.norm();
+        const double scale = r_adaption_.update_from_cosine(
+            s.timestamp_ns, mag_norm / state_.h_ref_norm,
+            kalman_support::cos_dip_deviation(kalman_support::sin_dip(s.mag, up, mag_norm), state_.h_ref_sin_dip,
+                                              state_.h_ref_cos_dip));
         use_mag = std::isfinite(scale);
         state_.flags.mag_rejected = !use_mag;
       }
     }
   }
-  const bool use_acc = s.has_acc && s.acc.norm() > 1e-6;
+  const bool use_acc = s.has_acc && s.acc.squaredNorm() > 1e-12;
   const Vec3 g_earth(0.0, 0.0, kGravity);
   if (use_acc && use_mag) {
     // One joint update: this is what couples the magnetometer into roll and pitch.
     Eigen::Matrix<double, 6, 1> r, var;
     Eigen::Matrix<double, 6, 4> h;
-    r.head<3>() = s.acc - state_.q.conjugate() * g_earth;
-    r.tail<3>() = s.mag - state_.q.conjugate() * state_.h_ref;
+    r.head<3>() = s.acc - kGravity * up;
+    r.tail<3>() = s.mag - to_sensor * state_.h_ref;
     h.topRows<3>() = rotate_to_sensor_jacobian(state_.q, g_earth);
     h.bottomRows<3>() = rotate_to_sensor_jacobian(state_.q, state_.h_ref);
     var << coeff_.var_a, coeff_.var_a, coeff_.var_a, coeff_.var_m, coeff_.var_m, coeff_.var_m;
@@ -257,18 +259,22 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
     const Vec3 ref = use_acc ? g_earth : state_.h_ref;
     const Vec3 meas = use_acc ? s.acc : s.mag;
     const Mat34 h = rotate_to_sensor_jacobian(state_.q, ref);
-    const Vec3 r = meas - state_.q.conjugate() * ref;
+    const Vec3 r = meas - to_sensor * ref;
     correct<3>(r, h, Vec3::Constant(use_acc ? coeff_.var_a : coeff_.var_m));
+  } else {
+    state_.q = kalman_support::unit(state_.q);
   }
 
-  // The norm is not a degree of freedom: project the covariance onto the tangent space of the unit sphere.
+  // The norm is not a degree of freedom: project the covariance onto the tangent space of the unit sphere,
+  // J = diag(I - q q^T, I). With a = A q: J A J = A - q a^T - a q^T + (q^T a) q q^T, and J B = B - q (q^T B).
   const Eigen::Vector4d qv = as_vector(state_.q);
-  const Mat4 j = Mat4::Identity() - qv * qv.transpose();  // J = diag(j, I)
-  const Mat43 jb = j * state_.p.topRightCorner<4, 3>();
-  state_.p.topLeftCorner<4, 4>() = j * state_.p.topLeftCorner<4, 4>() * j.transpose();
-  state_.p.topLeftCorner<4, 4>() += kNormDirectionVariance * qv * qv.transpose();
-  state_.p.topRightCorner<4, 3>() = jb;
-  state_.p.bottomLeftCorner<3, 4>() = jb.transpose();
+  const Eigen::Vector4d aq = state_.p.topLeftCorner<4, 4>() * qv;
+  const double qaq = qv.dot(aq);
+  state_.p.topLeftCorner<4, 4>() +=
+      (qaq + kNormDirectionVariance) * qv * qv.transpose() - qv * aq.transpose() - aq * qv.transpose();
+  const Eigen::RowVector3d qb = qv.transpose() * state_.p.topRightCorner<4, 3>();
+  state_.p.topRightCorner<4, 3>() -= qv * qb;
+  state_.p.bottomLeftCorner<3, 4>() = state_.p.topRightCorner<4, 3>().transpose();
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
 
   state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,

@@ -13,6 +13,20 @@ using Mat3 = Eigen::Matrix3d;
 
 inline std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
 
+/// v / |v| as one division and a multiplication per component (Eigen's normalized() divides each component);
+/// the caller guarantees |v| > 0.
+template <class V>
+V unit(const V& v) {
+  return v * (1.0 / v.norm());
+}
+
+/// q / |q| likewise, for a quaternion that is unit up to rounding after a product.
+inline Quat unit(const Quat& q) {
+  Quat n;
+  n.coeffs() = q.coeffs() * (1.0 / q.coeffs().norm());
+  return n;
+}
+
 /// Cross-product matrix: skew(a) * b = a x b.
 inline Mat3 skew(const Vec3& a) {
   Mat3 m;
@@ -22,24 +36,33 @@ inline Mat3 skew(const Vec3& a) {
 
 /// True when acc and mag give a well-defined TRIAD orientation (neither zero nor parallel).
 inline bool acc_mag_usable(const Vec3& acc, const Vec3& mag) {
-  const double na = acc.norm(), nm = mag.norm();
-  return na > 1e-6 && nm > 1e-9 && acc.cross(mag).norm() > 1e-3 * na * nm;
+  // |acc| > 1e-6, |mag| > 1e-9 and |acc x mag| > 1e-3 |acc| |mag|, compared squared (no square roots).
+  const double na2 = acc.squaredNorm(), nm2 = mag.squaredNorm();
+  return na2 > 1e-12 && nm2 > 1e-18 && acc.cross(mag).squaredNorm() > 1e-6 * na2 * nm2;
 }
 
-/// Dip angle of the field m below the horizontal plane whose upward normal is up (unit), rad, positive downwards
-/// (Fan eq. 17 with the estimated vertical).
-inline double dip_angle(const Vec3& m, const Vec3& up) {
-  const double n = m.norm();
-  if (!(n > 0.0)) return 0.0;
-  return std::asin(std::clamp(-m.dot(up) / n, -1.0, 1.0));
+/// Sine of the dip angle of the field m below the horizontal plane whose upward normal is up (unit), positive
+/// downwards (Fan eq. 17 with the estimated vertical), for |m| = m_norm: -m.up / |m| clamped to [-1, 1]; 0 for a
+/// zero field.
+inline double sin_dip(const Vec3& m, const Vec3& up, double m_norm) {
+  return m_norm > 0.0 ? std::clamp(-m.dot(up) / m_norm, -1.0, 1.0) : 0.0;
+}
+
+/// cos(dip - dip_ref) from the sines of both dips (their cosines are >= 0: dips lie within +-90 deg), without any
+/// inverse trigonometric function; cos_dip_ref = sqrt(1 - sin_dip_ref^2), computed once with the reference.
+inline double cos_dip_deviation(double sin_dip, double sin_dip_ref, double cos_dip_ref) {
+  return std::sqrt(std::max(0.0, 1.0 - sin_dip * sin_dip)) * cos_dip_ref + sin_dip * sin_dip_ref;
 }
 
 /// The rest flag: gyro norm and accelerometer deviation from g below thresholds for at least min_ns. still and
 /// still_since_ns are the caller's state.
 inline bool update_rest(bool& still, std::uint64_t& still_since_ns, const ImuSample& s, double gyr_max, double acc_max,
                         std::uint64_t min_ns) {
-  const bool still_now =
-      s.has_gyr && s.has_acc && s.gyr.norm() < gyr_max && std::abs(s.acc.norm() - kGravity) < acc_max;
+  // |gyr| < gyr_max and | |acc| - g | < acc_max, compared squared (no square roots).
+  const double acc2 = s.acc.squaredNorm();
+  const double acc_low = std::max(kGravity - acc_max, 0.0), acc_high = kGravity + acc_max;
+  const bool still_now = s.has_gyr && s.has_acc && s.gyr.squaredNorm() < gyr_max * gyr_max &&
+                         acc2 > acc_low * acc_low && acc2 < acc_high * acc_high;
   if (!still_now) {
     still = false;
   } else if (!still) {
@@ -53,7 +76,15 @@ inline bool update_rest(bool& still, std::uint64_t& still_since_ns, const ImuSam
 /// lets it lose positive definiteness.
 template <class Mat>
 void condition_covariance(Mat& p, double min_variance, double max_variance) {
-  p = 0.5 * (p + p.transpose()).eval();
+  for (int j = 0; j < p.cols(); ++j) {
+    for (int i = 0; i < j; ++i) p(i, j) = p(j, i) = 0.5 * (p(i, j) + p(j, i));
+    p(j, j) = std::clamp(p(j, j), min_variance, max_variance);
+  }
+}
+
+/// Clamps the variances (diagonal) of a covariance that is symmetric by construction, see condition_covariance.
+template <class Mat>
+void clamp_variances(Mat& p, double min_variance, double max_variance) {
   for (int i = 0; i < p.rows(); ++i) p(i, i) = std::clamp(p(i, i), min_variance, max_variance);
 }
 

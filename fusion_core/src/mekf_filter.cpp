@@ -41,6 +41,8 @@ constexpr ParamField<MekfFilter::Params> kParams[] = {
     {"intermediate_acc_m_s2", &MekfFilter::Params::intermediate_acc_m_s2},
     {"intensity_hold_s", &MekfFilter::Params::intensity_hold_s},
     {"min_switch_interval_s", &MekfFilter::Params::min_switch_interval_s},
+    {"switch_confirm_s", &MekfFilter::Params::switch_confirm_s},
+    {"table_rate_hz", &MekfFilter::Params::table_rate_hz},
 };
 
 // Below this rotation angle per step the closed forms lose digits to cancellation; their Taylor series are used.
@@ -81,11 +83,12 @@ PredictionBlocks prediction_blocks(const Vec3& w, double T, double sigma_g, doub
   double s1, c1, a1, a2, a3;
   if (u < kSeriesAngle) {
     const double u2 = u * u, T2 = T * T, T3 = T2 * T;
-    s1 = T * (1.0 - u2 / 6.0 + u2 * u2 / 120.0);
-    c1 = T2 * (0.5 - u2 / 24.0 + u2 * u2 / 720.0);
-    a1 = T3 * (1.0 / 6.0 - u2 / 120.0 + u2 * u2 / 5040.0);
-    a2 = T3 * T * (1.0 / 24.0 - u2 / 720.0 + u2 * u2 / 40320.0);
-    a3 = T3 * T2 * (1.0 / 60.0 - u2 / 2520.0 + u2 * u2 / 181440.0);
+    // Coefficients written as products with constant reciprocals: a division by a constant is not folded.
+    s1 = T * (1.0 - u2 * (1.0 / 6.0) + u2 * u2 * (1.0 / 120.0));
+    c1 = T2 * (0.5 - u2 * (1.0 / 24.0) + u2 * u2 * (1.0 / 720.0));
+    a1 = T3 * (1.0 / 6.0 - u2 * (1.0 / 120.0) + u2 * u2 * (1.0 / 5040.0));
+    a2 = T3 * T * (1.0 / 24.0 - u2 * (1.0 / 720.0) + u2 * u2 * (1.0 / 40320.0));
+    a3 = T3 * T2 * (1.0 / 60.0 - u2 * (1.0 / 2520.0) + u2 * u2 * (1.0 / 181440.0));
   } else {
     const double w2 = wn * wn, sin_u = std::sin(u), cos_u = std::cos(u);
     s1 = sin_u / wn;
@@ -95,16 +98,26 @@ PredictionBlocks prediction_blocks(const Vec3& w, double T, double sigma_g, doub
     a3 = (u * u * u / 3.0 - 2.0 * u + 2.0 * sin_u) / (w2 * w2 * wn);
   }
   const Mat3 W = skew(w);
-  const Mat3 W2 = W * W;
+  Mat3 W2 = w * w.transpose();  // [w x]^2 = w w^T - |w|^2 I
+  W2.diagonal().array() -= wn * wn;
   const Mat3 I = Mat3::Identity();
   const double g2 = sigma_g * sigma_g, b2 = sigma_bg * sigma_bg;
   PredictionBlocks out;
   out.theta = I - s1 * W + c1 * W2;
   out.psi = -(T * I - c1 * W + a1 * W2);
-  out.q11 = g2 * T * I + b2 * (I * (T * T * T / 3.0) + a3 * W2);
+  out.q11 = g2 * T * I + b2 * (I * (T * T * T * (1.0 / 3.0)) + a3 * W2);
   out.q12 = -b2 * (I * (T * T / 2.0) - a1 * W + a2 * W2);
   out.q22 = b2 * T;
   return out;
+}
+
+// mekf::integrate without the final normalisation (the caller normalises once per update).
+Quat integrate_unnormalised(const Quat& q, const Vec3& w_prev, const Vec3& w_now, double T) {
+  const Vec3 w_mean = 0.5 * (w_prev + w_now);
+  Quat dq = exp_rotation_vector(w_mean * T);
+  // Second Magnus term for a rate varying linearly over the step (the paper's 1/48 commutator term).
+  dq.vec() += (T * T * (1.0 / 24.0)) * w_prev.cross(w_now);
+  return q * dq;
 }
 
 }  // namespace
@@ -112,11 +125,7 @@ PredictionBlocks prediction_blocks(const Vec3& w, double T, double sigma_g, doub
 namespace mekf {
 
 Quat integrate(const Quat& q, const Vec3& w_prev, const Vec3& w_now, double T) {
-  const Vec3 w_mean = 0.5 * (w_prev + w_now);
-  Quat dq = exp_rotation_vector(w_mean * T);
-  // Second Magnus term for a rate varying linearly over the step (the paper's 1/48 commutator term).
-  dq.vec() += (T * T / 24.0) * w_prev.cross(w_now);
-  return (q * dq).normalized();
+  return kalman_support::unit(integrate_unnormalised(q, w_prev, w_now, T));
 }
 
 Mat6 transition(const Vec3& w, double T) {
@@ -175,6 +184,8 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   require_positive(n, params.intermediate_acc_m_s2, "intermediate_acc_m_s2");
   require_non_negative(n, params.intensity_hold_s, "intensity_hold_s");
   require_non_negative(n, params.min_switch_interval_s, "min_switch_interval_s");
+  require_non_negative(n, params.switch_confirm_s, "switch_confirm_s");
+  require_non_negative(n, params.table_rate_hz, "table_rate_hz");
   if (!(params.static_gyr_rad_s < params.slow_gyr_rad_s && params.slow_gyr_rad_s < params.intermediate_gyr_rad_s &&
         params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
     throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
@@ -185,6 +196,8 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
   coeff_.intensity_hold_ns = kalman_support::seconds_to_ns(params.intensity_hold_s);
   coeff_.min_switch_interval_ns = kalman_support::seconds_to_ns(params.min_switch_interval_s);
+  coeff_.switch_confirm_ns = kalman_support::seconds_to_ns(params.switch_confirm_s);
+  coeff_.bias_cap_time_s = std::max(params.min_switch_interval_s, 1.0);
   reset();
 }
 
@@ -201,7 +214,9 @@ MekfNoise MekfFilter::noise() const {
 void MekfFilter::set_reference(const Vec3& mag_earth) {
   // Only the horizontal magnitude and the vertical component matter: the reference points to magnetic north.
   state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
-  state_.h_ref_dip = kalman_support::dip_angle(state_.h_ref, Vec3::UnitZ());
+  state_.h_ref_norm = state_.h_ref.norm();
+  state_.h_ref_sin_dip = kalman_support::sin_dip(state_.h_ref, Vec3::UnitZ(), state_.h_ref_norm);
+  state_.h_ref_cos_dip = std::sqrt(1.0 - state_.h_ref_sin_dip * state_.h_ref_sin_dip);
 }
 
 UpdateResult MekfFilter::initialise(const ImuSample& s) {
@@ -246,38 +261,63 @@ void MekfFilter::adapt(const ImuSample& s) {
       break;
     }
   }
-  if (candidate != state_.intensity && t - state_.last_switch_ns >= coeff_.min_switch_interval_ns) {
-    state_.intensity = candidate;
+  // A change is confirmed only after the intensity has differed from the set in use for switch_confirm_s; the new
+  // set is the highest class seen in that time. Motion starts gently, and a set chosen on its first samples
+  // would be locked in for min_switch_interval_s however intense the motion then becomes.
+  if (candidate == state_.intensity) {
+    state_.differing = false;
+    return;
+  }
+  if (!state_.differing) {
+    state_.differing = true;
+    state_.differing_since_ns = t;
+    state_.differing_max = candidate;
+  }
+  state_.differing_max = std::max(state_.differing_max, candidate);
+  if (t - state_.differing_since_ns >= coeff_.switch_confirm_ns &&
+      t - state_.last_switch_ns >= coeff_.min_switch_interval_ns) {
+    state_.intensity = state_.differing_max;
     state_.last_switch_ns = t;
+    // Entering the static or slow set (sigma_a = 0.2 m/s^2, identified on motion below 0.05 g): the bias
+    // covariance built up under the old set (under the static set's loose gyro the bias is not observable, so it
+    // keeps its initial variance) is inconsistent with the stiff new set, which would give the bias a large gain
+    // and let it absorb external acceleration (on BROAD up to several rad/s). It is capped at what the new set's
+    // random walk accumulates over one switch interval, by the congruence D P D (D scales the bias rows and
+    // columns), which keeps P positive definite.
+    const double sigma_bg = kNezTable3[static_cast<std::size_t>(state_.intensity)].sigma_bg;
+    const double cap = sigma_bg * sigma_bg * coeff_.bias_cap_time_s;
+    const double largest = state_.p.bottomRightCorner<3, 3>().diagonal().maxCoeff();
+    if (state_.intensity <= static_cast<int>(MotionIntensity::kSlow) && largest > cap) {
+      const double d = std::sqrt(cap / largest);
+      state_.p.bottomRows<3>() *= d;
+      state_.p.rightCols<3>() *= d;
+    }
+    state_.differing = false;
     ++state_.switches;
   }
 }
 
 void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n) {
-  // H = [[z x] 0]; with P = [A B; B^T C] every product is done on 3x3 blocks (no 6x6 products).
-  const Vec3 z_hat = state_.q.conjugate() * Vec3(0.0, 0.0, kGravity);
+  // H = [[z x] 0] and R = sigma_a^2 I (diagonal): the three rows are processed one at a time against the same
+  // linearisation, which is the batch update K = P H^T S^-1, P <- P - K H P (Nez B.2) up to rounding, without
+  // inverting S. Each row: P <- P - (P h^T)(P h^T)^T / s, symmetric by construction.
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  const Vec3 z_hat = kGravity * earth_axis_in_sensor(state_.q, 2);
   const Mat3 hx = skew(z_hat);
-  const double r = n.sigma_a * n.sigma_a;
-  const Mat3 a = state_.p.topLeftCorner<3, 3>();
-  const Mat3 b = state_.p.topRightCorner<3, 3>();
-  const Mat3 c = state_.p.bottomRightCorner<3, 3>();
-  const Mat3 s = hx * a * hx.transpose() + r * Mat3::Identity();
-  const Mat3 s_inv = s.inverse();
-  const Mat3 ka = a * hx.transpose() * s_inv;              // attitude rows of K
-  const Mat3 kb = b.transpose() * hx.transpose() * s_inv;  // bias rows of K
   const Vec3 residual = acc - z_hat;
-  state_.q = (state_.q * exp_rotation_vector(ka * residual)).normalized();
-  state_.bias += kb * residual;
-  // Joseph form (I - K H) P (I - K H)^T + K R K^T: stays symmetric positive definite under rounding.
-  // I - K H = [G 0; L I] with G = I - ka hx, L = -kb hx.
-  const Mat3 g = Mat3::Identity() - ka * hx;
-  const Mat3 l = -kb * hx;
-  const Mat3 ga = g * a;
-  const Mat3 top_right = ga * l.transpose() + g * b + r * ka * kb.transpose();
-  state_.p.topLeftCorner<3, 3>() = ga * g.transpose() + r * ka * ka.transpose();
-  state_.p.topRightCorner<3, 3>() = top_right;
-  state_.p.bottomLeftCorner<3, 3>() = top_right.transpose();
-  state_.p.bottomRightCorner<3, 3>() = (l * a + b.transpose()) * l.transpose() + l * b + c + r * kb * kb.transpose();
+  const double r = n.sigma_a * n.sigma_a;
+  Vec6 dx = Vec6::Zero();
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 h = hx.row(i).transpose();
+    const Vec6 ph = state_.p.leftCols<3>() * h;
+    const double s = h.dot(ph.head<3>()) + r;
+    const Vec6 k = ph * (1.0 / s);
+    dx += k * (residual(i) - h.dot(dx.head<3>()));
+    state_.p.noalias() -= k * ph.transpose();
+  }
+  // Product of unit quaternions: unit up to rounding; update() normalises once at the end.
+  state_.q = state_.q * exp_rotation_vector(dx.head<3>());
+  state_.bias += dx.tail<3>();
 }
 
 void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
@@ -295,29 +335,40 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
     set_reference(state_.q * s.mag);
     return;
   }
-  const Vec3 r3 = state_.q.conjugate() * Vec3::UnitZ();  // earth vertical in the sensor frame
+  const Mat3 to_sensor = state_.q.toRotationMatrix().transpose();
+  const Vec3 r3 = to_sensor.col(2);  // earth vertical in the sensor frame
   if (params_.mag_rejection != 0.0) {
-    const double ref_norm = state_.h_ref.norm();
-    const double scale = r_adaption_.update(s.timestamp_ns, s.mag.norm() / ref_norm,
-                                            kalman_support::dip_angle(s.mag, r3) - state_.h_ref_dip);
+    const double mag_norm = s.mag.norm();
+    const double scale =
+        r_adaption_.update_from_cosine(s.timestamp_ns, mag_norm / state_.h_ref_norm,
+                                       kalman_support::cos_dip_deviation(kalman_support::sin_dip(s.mag, r3, mag_norm),
+                                                                         state_.h_ref_sin_dip, state_.h_ref_cos_dip));
     if (!std::isfinite(scale)) {
       state_.flags.mag_rejected = true;
       return;
     }
   }
-  const Vec3 z_hat = state_.q.conjugate() * state_.h_ref;
+  const Vec3 z_hat = to_sensor * state_.h_ref;
   const Mat3 hm = skew(z_hat);
   const Mat3 p_att = state_.p.topLeftCorner<3, 3>();  // Suh: the covariance truncated to the attitude block
   const double r = n.sigma_m * n.sigma_m;
-  const Mat3 s_m = hm * p_att * hm.transpose() + r * Mat3::Identity();
-  // Suh's gain projection: only the rotation about the vertical survives, the bias is untouched.
-  const Mat3 k_att = r3 * r3.transpose() * p_att * hm.transpose() * s_m.inverse();
-  const Vec3 dtheta = k_att * (s.mag - z_hat);
-  state_.q = (state_.q * exp_rotation_vector(dtheta)).normalized();
-  // Joseph form with the full covariance, exact for this (suboptimal) gain: I - K H = [G 0; 0 I].
-  const Mat3 g = Mat3::Identity() - k_att * hm;
-  state_.p.topLeftCorner<3, 3>() = g * p_att * g.transpose() + r * k_att * k_att.transpose();
-  state_.p.topRightCorner<3, 3>() = g * state_.p.topRightCorner<3, 3>();
+  const Mat3 hm_p = hm * p_att;
+  Mat3 s_m = hm_p * hm.transpose();
+  s_m.diagonal().array() += r;
+  // Suh's gain projection: only the rotation about the vertical survives, the bias is untouched. The gain
+  // r3 r3^T P_att hm^T S^-1 is the rank-1 r3 u^T with u = S^-1 hm P_att r3 (S and P_att symmetric).
+  const Vec3 u = s_m.inverse() * (hm_p * r3);
+  const Vec3 dtheta = r3 * u.dot(s.mag - z_hat);
+  state_.q = state_.q * exp_rotation_vector(dtheta);  // normalised at the end of update()
+  // Joseph form with the full covariance, exact for this (suboptimal) gain: I - K H = [G 0; 0 I] with
+  // G = I - r3 w^T, w = hm^T u. Then G A G^T + r K K^T = A - r3 (A w)^T - (A w) r3^T + (w^T A w + r u^T u) r3 r3^T
+  // and G B = B - r3 (B^T w)^T: rank-1 corrections only.
+  const Vec3 w = hm.transpose() * u;
+  const Vec3 aw = p_att * w;
+  state_.p.topLeftCorner<3, 3>() +=
+      (w.dot(aw) + r * u.squaredNorm()) * r3 * r3.transpose() - r3 * aw.transpose() - aw * r3.transpose();
+  const Eigen::RowVector3d wb = w.transpose() * state_.p.topRightCorner<3, 3>();
+  state_.p.topRightCorner<3, 3>() -= r3 * wb;
   state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
 }
 
@@ -331,12 +382,18 @@ UpdateResult MekfFilter::update(const ImuSample& s) {
   state_.last_ns = s.timestamp_ns;
   state_.flags.reinitialised = false;
   if (adaptive_) adapt(s);
-  const MekfNoise n = noise();
+  MekfNoise n = noise();
+  if (adaptive_ && params_.table_rate_hz > 0.0) {
+    // R is per sample: at f Hz the same information per second as at table_rate_hz needs R * f / table_rate_hz.
+    const double k = std::sqrt(1.0 / (dt * params_.table_rate_hz));
+    n.sigma_a *= k;
+    n.sigma_m *= k;
+  }
 
   // Prediction (Nez B.1): bias random walk, quaternion integrator, closed-form Phi and Q_d.
   const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - state_.bias) : Vec3::Zero();
   const Vec3 w_prev = state_.have_w_prev ? state_.w_prev : w_now;
-  state_.q = mekf::integrate(state_.q, w_prev, w_now, dt);
+  state_.q = integrate_unnormalised(state_.q, w_prev, w_now, dt);  // |q| = 1 + O(T^3): normalised below
   const Vec3 w_mean = 0.5 * (w_prev + w_now);
   // P <- Phi P Phi^T + Q_d on 3x3 blocks: Phi = [Theta Psi; 0 I], P = [A B; B^T C].
   const PredictionBlocks blocks = prediction_blocks(w_mean, dt, n.sigma_g, n.sigma_bg);
@@ -344,14 +401,21 @@ UpdateResult MekfFilter::update(const ImuSample& s) {
   const Mat3& psi = blocks.psi;
   const Mat3 pa = state_.p.topLeftCorner<3, 3>(), pb = state_.p.topRightCorner<3, 3>();
   const Mat3 m = theta * pb + psi * state_.p.bottomRightCorner<3, 3>();
-  state_.p.topLeftCorner<3, 3>() =
-      (theta * pa + psi * pb.transpose()) * theta.transpose() + m * psi.transpose() + blocks.q11;
+  const Mat3 n_top = theta * pa + psi * pb.transpose();
+  // A' = n_top theta^T + m psi^T + q11 is symmetric: its lower triangle is computed and mirrored.
+  for (int j = 0; j < 3; ++j) {
+    for (int i = j; i < 3; ++i) {
+      const double a_ij = n_top.row(i).dot(theta.row(j)) + m.row(i).dot(psi.row(j)) + blocks.q11(i, j);
+      state_.p(i, j) = a_ij;
+      state_.p(j, i) = a_ij;
+    }
+  }
   state_.p.topRightCorner<3, 3>() = m + blocks.q12;
   state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
   state_.p.bottomRightCorner<3, 3>().diagonal().array() += blocks.q22;
 
   // Update step 1: the accelerometer corrects attitude and bias.
-  if (s.has_acc && s.acc.norm() > 1e-6) update_accelerometer(s.acc, n);
+  if (s.has_acc && s.acc.squaredNorm() > 1e-12) update_accelerometer(s.acc, n);
   state_.w_prev = s.has_gyr ? Vec3(s.gyr - state_.bias) : Vec3::Zero();
   state_.have_w_prev = s.has_gyr;
 
@@ -362,6 +426,7 @@ UpdateResult MekfFilter::update(const ImuSample& s) {
     state_.flags.mag_rejected = false;
   }
 
+  state_.q = kalman_support::unit(state_.q);
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
   state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
                                                      params_.rest_acc_m_s2, coeff_.rest_min_ns);

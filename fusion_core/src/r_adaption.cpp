@@ -22,17 +22,30 @@ MagneticRAdaption::MagneticRAdaption(const Params& params) : params_(params) {
       "need 0 < dip_exit_rad <= dip_enter_rad (finite)");
   require(params.min_clean_s >= 0.0 && params.min_clean_s < 1e6, "need 0 <= min_clean_s < 1e6");
   min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.min_clean_s * 1e9));
+  constexpr double kPi = 3.14159265358979323846;
+  cos_dip_enter_ = params.dip_enter_rad < kPi ? std::cos(params.dip_enter_rad) : -2.0;
+  cos_dip_exit_ = params.dip_exit_rad < kPi ? std::cos(params.dip_exit_rad) : -2.0;
 }
 
 double MagneticRAdaption::update(std::uint64_t t_ns, double magnitude_ratio, double dip_deviation_rad) {
-  const double magnitude_dev = std::abs(magnitude_ratio - 1.0);
   const double dip_dev = std::abs(dip_deviation_rad);
-  const bool finite = std::isfinite(magnitude_dev) && std::isfinite(dip_dev);
-  if (!finite || magnitude_dev > params_.magnitude_enter || dip_dev > params_.dip_enter_rad) {
+  return judge(t_ns, magnitude_ratio, std::isfinite(dip_dev), dip_dev > params_.dip_enter_rad,
+               dip_dev < params_.dip_exit_rad);
+}
+
+double MagneticRAdaption::update_from_cosine(std::uint64_t t_ns, double magnitude_ratio, double cos_dip_deviation) {
+  return judge(t_ns, magnitude_ratio, std::isfinite(cos_dip_deviation),
+               cos_dip_deviation<cos_dip_enter_, cos_dip_deviation> cos_dip_exit_);
+}
+
+double MagneticRAdaption::judge(std::uint64_t t_ns, double magnitude_ratio, bool finite, bool dip_over_enter,
+                                bool dip_under_exit) {
+  const double magnitude_dev = std::abs(magnitude_ratio - 1.0);
+  if (!finite || !std::isfinite(magnitude_dev) || magnitude_dev > params_.magnitude_enter || dip_over_enter) {
     disturbed_ = true;
     clean_since_valid_ = false;
   } else if (disturbed_) {
-    const bool clean = magnitude_dev < params_.magnitude_exit && dip_dev < params_.dip_exit_rad;
+    const bool clean = magnitude_dev < params_.magnitude_exit && dip_under_exit;
     if (!clean) {
       clean_since_valid_ = false;  // between the thresholds: still disturbed, the clean clock restarts
     } else if (!clean_since_valid_) {

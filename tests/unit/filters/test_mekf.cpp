@@ -271,6 +271,51 @@ TEST(Mekf, AdaptiveSwitchesByIntensityNeverTwiceWithinTenSeconds) {
   EXPECT_LE(switch_times.size(), 6u);
 }
 
+// Motion that starts gently and then becomes fast: the set is confirmed only after switch_confirm_s, on the highest
+// class seen meanwhile (fast), not on the first moving samples (slow), which would then be locked in for 10 s.
+TEST(Mekf, AdaptiveConfirmsASwitchOnTheHighestClassSeenAtMotionOnset) {
+  for (const double confirm_s : {0.5, 0.0}) {
+    MekfFilter::Params p;
+    p.switch_confirm_s = confirm_s;
+    MekfFilter f(p, true);
+    const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
+    for (std::uint64_t k = 0; k <= 2100; ++k) {
+      const double t = 0.01 * static_cast<double>(k);
+      ImuSample s = static_sample(q, k * 10 * kMs);
+      if (t >= 20.0 && t < 20.2) {
+        s.gyr = Vec3(0, 0, 0.5);  // 29 deg/s: slow
+      } else if (t >= 20.2) {
+        s.gyr = Vec3(12.0, 0, 0);  // 690 deg/s and 4 g: fast
+        s.acc += Vec3(0, 40.0, 0);
+      }
+      f.update(s);
+      if (k == 1999) {
+        EXPECT_EQ(f.intensity(), 0) << confirm_s;  // static since the first switch at 10 s
+      }
+    }
+    EXPECT_EQ(f.intensity(), confirm_s > 0.0 ? 3 : 1) << confirm_s;
+  }
+}
+
+// Entering a stiff set (static or slow), the bias variance kept from the previous set is capped at what the new
+// set's random walk accumulates over one switch interval (sigma_bg^2 * 10 s), keeping P positive definite.
+TEST(Mekf, AdaptiveCapsTheBiasCovarianceWhenEnteringAStiffSet) {
+  MekfFilter f(MekfFilter::Params{}, true);  // starts with the fast set, initial bias sigma 0.01 rad/s
+  const Quat q = from_yaw_pitch_roll({-1.0, 0.2, 0.1});
+  for (std::uint64_t k = 0; k <= 1100; ++k) {
+    f.update(static_sample(q, k * 10 * kMs));
+    if (f.state().switches == 1) {
+      EXPECT_EQ(f.intensity(), 0);
+      const double sigma_bg = kNezTable3[0].sigma_bg;
+      const double largest_bias_variance = f.covariance().bottomRightCorner(3, 3).diagonal().maxCoeff();
+      EXPECT_LE(largest_bias_variance, sigma_bg * sigma_bg * 10.0 * 1.001);
+      EXPECT_EQ(f.covariance().llt().info(), Eigen::Success);
+      return;
+    }
+  }
+  ADD_FAILURE() << "no switch to the static set within 11 s";
+}
+
 TEST(Mekf, SlowerMagnetometerAndSixDSamples) {
   MekfFilter f;
   RotatingSensor sensor(11, 0.01, {1e-3, 1e-5, 0.05, 0.3}, from_yaw_pitch_roll({2.0, 0.1, 0.3}), Vec3::Zero());

@@ -21,6 +21,27 @@ TEST(MagneticRAdaption, CleanFieldKeepsTheNominalVariance) {
   EXPECT_FALSE(r.disturbed());
 }
 
+// The filters pass the cosine of the dip deviation (no inverse sine); it must judge every sample exactly as the
+// angle does, across both thresholds and the clean waiting time.
+TEST(MagneticRAdaption, CosineOfTheDipDeviationJudgesExactlyAsTheAngle) {
+  MagneticRAdaption by_angle, by_cosine;
+  int disturbed = 0;
+  for (std::uint64_t k = 0; k < 2000; ++k) {
+    const double t = 0.01 * static_cast<double>(k);
+    // Dip deviation sweeping +-0.3 rad across both thresholds (0.1745 / 0.0873), magnitude mostly clean.
+    const double dip_dev = 0.3 * std::sin(0.7 * t) * std::sin(0.13 * t);
+    const double ratio = 1.0 + 0.03 * std::sin(1.3 * t);
+    const double a = by_angle.update(k * 10 * kMs, ratio, dip_dev);
+    const double c = by_cosine.update_from_cosine(k * 10 * kMs, ratio, std::cos(dip_dev));
+    ASSERT_EQ(a, c) << "t = " << t << ", dip deviation " << dip_dev;
+    disturbed += std::isinf(a) ? 1 : 0;
+  }
+  EXPECT_GT(disturbed, 100);  // both states were visited
+  EXPECT_LT(disturbed, 1900);
+  MagneticRAdaption r;
+  EXPECT_TRUE(std::isinf(r.update_from_cosine(0, 1.0, std::nan(""))));
+}
+
 TEST(MagneticRAdaption, MagnitudeOrDipBeyondTheEnterThresholdGivesInfiniteVariance) {
   MagneticRAdaption r;
   EXPECT_TRUE(std::isinf(r.update(0, 1.11, 0.0)));

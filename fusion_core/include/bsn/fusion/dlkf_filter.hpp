@@ -103,18 +103,21 @@ class DlkfFilter final : public OrientationFilter {
     double var_dist = 0.0;  ///< sigma_mag_disturbance^2
     double inv_tau_ext = 0.0;
     double inv_tau_dist = 0.0;
+    double acc_accept_min2 = 0.0;  ///< (max(g - acc_rejection_m_s2, 0))^2: |acc|^2 range of the R-adaption
+    double acc_accept_max2 = 0.0;  ///< (g + acc_rejection_m_s2)^2
     std::uint64_t max_gap_ns = 0;
     std::uint64_t rest_min_ns = 0;
     std::uint64_t init_period_ns = 0;
   };
 
   struct State {
-    dlkf::SplitKalman gravity;   ///< [g_S (m/s^2), external acceleration a_S (m/s^2)]
-    dlkf::SplitKalman magnetic;  ///< [h_S (uT), disturbance d_S (uT)]
-    bool have_mag = false;       ///< the magnetic filter holds a measured field (else a gyro-carried heading)
-    double mag_ref_norm = 0.0;   ///< |h| at the first magnetometer sample, uT (R-adaption reference)
-    double mag_ref_dip = 0.0;    ///< dip at the first magnetometer sample, rad
-    Quat q = Quat::Identity();   ///< TRIAD result, sensor-to-earth
+    dlkf::SplitKalman gravity;     ///< [g_S (m/s^2), external acceleration a_S (m/s^2)]
+    dlkf::SplitKalman magnetic;    ///< [h_S (uT), disturbance d_S (uT)]
+    bool have_mag = false;         ///< the magnetic filter holds a measured field (else a gyro-carried heading)
+    double mag_ref_norm = 0.0;     ///< |h| at the first magnetometer sample, uT (R-adaption reference)
+    double mag_ref_sin_dip = 0.0;  ///< sine of the dip at the first magnetometer sample (R-adaption reference)
+    double mag_ref_cos_dip = 1.0;  ///< its cosine
+    Quat q = Quat::Identity();     ///< TRIAD result, sensor-to-earth
     Vec3 gyr_prev = Vec3::Zero();
     bool have_gyr_prev = false;
     bool initialised = false;

@@ -6,6 +6,10 @@
 //  - Q and R from sigma_g, sigma_bg, sigma_a, sigma_m, with the paper's Table 3 as presets;
 //  - an adaptive variant ("mekf_adaptive") that picks the Table 3 set by motion intensity, from the instantaneous
 //    acceleration and angular rate, and never switches twice within min_switch_interval_s (10 s in the paper).
+//    Each set is used only within the range of Table 1 it was identified on, a change is confirmed on the highest
+//    class seen over switch_confirm_s, the sets' per-sample sigma_a and sigma_m are scaled from 128 Hz to the
+//    actual rate, and entering a stiff set caps the bias covariance, so that the bias cannot absorb external
+//    acceleration while a set is locked in.
 // Nez work in NED with a JPL-style error; here everything is in the project's convention (ENU, Hamilton,
 // sensor-to-earth q) and the error state is the sensor-frame rotation vector: q_true = q_est * exp(dtheta).
 // With that choice the error dynamics, Phi, Q_d and H are the paper's, and r3 is the earth vertical expressed in
@@ -64,7 +68,7 @@ class MekfFilter final : public OrientationFilter {
  public:
   struct Params {
     /// Table 3 set used for Q and R: 0 static, 1 slow, 2 intermediate, 3 fast. Default 3 (fast): measured on the
-    /// eight BROAD trials (mean total RMSE 3.7 deg; intermediate 4.4 deg, slow 36 deg, static 58 deg). Table 3 was
+    /// eight BROAD trials (mean total RMSE 3.7 deg; intermediate 12.3 deg, slow 55 deg, static 74 deg). Table 3 was
     /// identified on other sensors at 128 Hz, and R is per sample, so the sets that trust the accelerometer
     /// more are too stiff for BROAD's 286 Hz and fast trials. For "mekf_adaptive" it is the set it starts with.
     double preset = 3.0;
@@ -99,25 +103,37 @@ class MekfFilter final : public OrientationFilter {
     double rest_min_s = 1.5;
     /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
     double init_period_s = 3.0;
-    // Adaptive variant only. Intensity thresholds at the midpoints between the classes of Nez Table 1
-    // (slow 0.03 g / 40 deg/s, intermediate 0.7 g / 300 deg/s, fast 4 g / 700 deg/s); static is below the
-    // rest-like thresholds. A sample's class is the higher of its acceleration class and its rate class.
+    // Adaptive variant only. Intensity thresholds at the upper end (mean + 1 standard deviation) of the classes of
+    // Nez Table 1 (slow 0.03 +- 0.02 g / 40 +- 20 deg/s, intermediate 0.7 +- 0.5 g / 300 +- 150 deg/s): each set is
+    // used only for motion within the range it was identified on. Static is below rest-like thresholds. A
+    // sample's class is the higher of its acceleration class and its rate class. (The midpoints between the class
+    // means, 170 deg/s and 0.365 g, put most of BROAD's motion into the slow class, whose stiff set then lets
+    // external acceleration into the bias.)
     /// Below both static thresholds the sample is static: |gyr| < 0.1 rad/s (5.7 deg/s) and | |acc| - g | <
     /// 0.3 m/s^2. Defaults 0.1 rad/s and 0.3 m/s^2.
     double static_gyr_rad_s = 0.1;
     double static_acc_m_s2 = 0.3;
-    /// Upper bounds of the slow class: 170 deg/s = 2.967 rad/s, 0.365 g = 3.58 m/s^2 (of external acceleration
+    /// Upper bounds of the slow class: 60 deg/s = 1.047 rad/s, 0.05 g = 0.49 m/s^2 (of external acceleration
     /// | |acc| - g |).
-    double slow_gyr_rad_s = 2.967;
-    double slow_acc_m_s2 = 3.58;
-    /// Upper bounds of the intermediate class: 500 deg/s = 8.727 rad/s, 2.35 g = 23.0 m/s^2.
-    double intermediate_gyr_rad_s = 8.727;
-    double intermediate_acc_m_s2 = 23.0;
+    double slow_gyr_rad_s = 1.047;
+    double slow_acc_m_s2 = 0.49;
+    /// Upper bounds of the intermediate class: 450 deg/s = 7.854 rad/s, 1.2 g = 11.77 m/s^2.
+    double intermediate_gyr_rad_s = 7.854;
+    double intermediate_acc_m_s2 = 11.77;
     /// The intensity is the highest instantaneous class seen within this window, s, so that a single quiet sample
     /// in the middle of a movement does not count as a calmer class. 0 = purely instantaneous. Default 0.5 s.
     double intensity_hold_s = 0.5;
     /// Minimum time between two changes of the parameter set, s (Nez §2.6: 10 s). Default 10 s.
     double min_switch_interval_s = 10.0;
+    /// A change of set is made only once the intensity has differed from the set in use for this long, s, and
+    /// then to the highest class seen meanwhile: motion starts gently, and a set chosen on its first samples would
+    /// be locked in for min_switch_interval_s. 0 = at the first differing sample. Default 0.5 s (BROAD mean total
+    /// RMSE: 0 s 7.6 deg, 0.3 s 5.1, 0.5 s 5.5, 1 s 6.0, 2 s 8.7: longer keeps the old set too long at motion onset).
+    double switch_confirm_s = 0.5;
+    /// Sample rate at which Table 3 was identified, Hz (Nez: 128 Hz). sigma_a and sigma_m are per-sample values,
+    /// so at f Hz the adaptive filter scales them by sqrt(f / table_rate_hz): the accelerometer and magnetometer
+    /// then carry the same information per second as in the paper. 0 = use them as they are. Default 128.
+    double table_rate_hz = 128.0;
   };
 
   struct Coefficients {
@@ -127,6 +143,8 @@ class MekfFilter final : public OrientationFilter {
     std::uint64_t init_period_ns = 0;
     std::uint64_t intensity_hold_ns = 0;
     std::uint64_t min_switch_interval_ns = 0;
+    std::uint64_t switch_confirm_ns = 0;
+    double bias_cap_time_s = 10.0;  ///< at a switch the bias variance is capped at sigma_bg^2 times this, s
     int start_intensity = 1;
   };
 
@@ -136,8 +154,10 @@ class MekfFilter final : public OrientationFilter {
     mekf::Mat6 p = mekf::Mat6::Identity();  ///< error-state covariance of [dtheta (rad), db (rad/s)]
     Vec3 w_prev = Vec3::Zero();             ///< bias-corrected rate at the previous sample, rad/s
     bool have_w_prev = false;
-    Vec3 h_ref = Vec3::Zero();  ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
-    double h_ref_dip = 0.0;     ///< dip of h_ref, rad
+    Vec3 h_ref = Vec3::Zero();   ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
+    double h_ref_sin_dip = 0.0;  ///< sine of the dip of h_ref (the R-adaption compares dips by their cosine)
+    double h_ref_cos_dip = 1.0;  ///< its cosine
+    double h_ref_norm = 0.0;     ///< |h_ref|, uT
     bool initialised = false;
     std::uint64_t last_ns = 0;
     std::uint64_t init_ns = 0;
@@ -147,7 +167,10 @@ class MekfFilter final : public OrientationFilter {
     std::array<bool, 4> class_seen{};
     bool still = false;  ///< rest detection: currently below the thresholds
     std::uint64_t still_since_ns = 0;
-    int switches = 0;  ///< number of parameter-set switches since initialisation
+    int switches = 0;                      ///< number of parameter-set switches since initialisation
+    bool differing = false;                ///< the intensity currently differs from the set in use
+    std::uint64_t differing_since_ns = 0;  ///< since when
+    int differing_max = 0;                 ///< highest class seen since then
     FilterFlags flags;
   };
 

@@ -36,6 +36,9 @@ class MagneticRAdaption {
   /// minus reference dip. Returns the factor for the nominal measurement variance: 1 (trusted) or +infinity
   /// (disturbed, eq. 10). Non-finite inputs count as disturbed.
   double update(std::uint64_t t_ns, double magnitude_ratio, double dip_deviation_rad);
+  /// The same judgement from the cosine of the dip deviation instead of the angle (|dev| > threshold exactly when
+  /// cos(dev) < cos(threshold), for deviations within +-180 deg), so that the filters need no inverse sine.
+  double update_from_cosine(std::uint64_t t_ns, double magnitude_ratio, double cos_dip_deviation);
 
   /// True while the field is judged disturbed (including the clean waiting period).
   bool disturbed() const { return disturbed_; }
@@ -51,8 +54,12 @@ class MagneticRAdaption {
   static constexpr double kInfiniteVariance = std::numeric_limits<double>::infinity();
 
  private:
+  double judge(std::uint64_t t_ns, double magnitude_ratio, bool finite, bool dip_over_enter, bool dip_under_exit);
+
   Params params_;
   std::uint64_t min_clean_ns_ = 0;
+  double cos_dip_enter_ = 0.0;  ///< cos(dip_enter_rad), or -2 (never reached) when the threshold is >= 180 deg
+  double cos_dip_exit_ = 0.0;   ///< cos(dip_exit_rad), or -2 likewise
   bool disturbed_ = false;
   bool clean_since_valid_ = false;  ///< a clean period has started while disturbed_
   std::uint64_t clean_since_ns_ = 0;
