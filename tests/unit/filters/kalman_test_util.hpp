@@ -2,12 +2,14 @@
 // they do not use the simulator so that the tests pin the filters, not the simulator.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <numbers>
 #include <random>
 
 #include "bsn/fusion/imu_sample.hpp"
+#include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion::test {
@@ -125,6 +127,29 @@ inline Vec3 magnet_field(double t) {
     if (t > t0 && t < t0 + 3.0) bump = std::pow(std::sin(std::numbers::pi * (t - t0) / 3.0), 2);
   }
   return bump * Vec3(-30.0, 12.0, 24.0);
+}
+
+/// Largest deviations of a filter's Euler angles from the truth over a run, rad.
+struct EulerDeviation {
+  double tilt = 0.0;  ///< max over time of |pitch error| and |roll error|
+  double yaw = 0.0;   ///< max over time of |yaw error|
+};
+
+/// Runs Fan test B on a fresh filter: the sensor sits still for 30 s at 100 Hz at yaw 70, pitch 12, roll -20 deg
+/// while the magnet of magnet_field() approaches five times. Returns how far the estimate strayed.
+inline EulerDeviation fan_test_b(OrientationFilter& f) {
+  const YawPitchRoll truth{70 * kDeg, 12 * kDeg, -20 * kDeg};
+  const Quat q = from_yaw_pitch_roll(truth);
+  EulerDeviation dev;
+  for (std::uint64_t k = 0; k <= 3000; ++k) {
+    ImuSample s = static_sample(q, k * 10 * kMs);
+    s.mag += magnet_field(0.01 * static_cast<double>(k));
+    f.update(s);
+    const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
+    dev.tilt = std::max({dev.tilt, std::abs(est.pitch - truth.pitch), std::abs(est.roll - truth.roll)});
+    dev.yaw = std::max(dev.yaw, std::abs(est.yaw - truth.yaw));
+  }
+  return dev;
 }
 
 }  // namespace bsn::fusion::test

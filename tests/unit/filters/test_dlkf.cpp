@@ -1,11 +1,14 @@
-// DlkfFilter (Fan et al. 2018 §2.4.1, Fig. 4) against its defining properties: TRIAD (eqs. 1-4) is exact for any
-// heading, roll and pitch never depend on the magnetometer (Fan test B), each of the two linear filters is
-// consistent with the noise it assumes (NEES), the low-pass gyro bias removes a bias at rest, and bad input never
-// touches the state.
+// DlkfFilter (Fan et al. 2018 §2.4.1, Fig. 4) against its own defining properties: TRIAD (eqs. 1-4) is exact for
+// any heading, each of the two linear filters is consistent with the noise it assumes (NEES), the sequential scalar
+// correction equals the batch update, and a start without magnetometer takes the heading from the first one. What it
+// shares with the EKF and MEKF (initialisation and static accuracy at any heading with the low-pass gyro bias,
+// covariances, bad input, factory, and Fan test B: roll and pitch never depend on the magnetometer) is in
+// test_kalman_common.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <stdexcept>
+#include <random>
+#include <string>
 
 #include "bsn/fusion/dlkf_filter.hpp"
 #include "kalman_test_util.hpp"
@@ -26,69 +29,6 @@ TEST(Dlkf, TriadMatchesTheTrueOrientationForAnyHeadingAndEulerEq4) {
     EXPECT_NEAR(a.pitch, 30 * kDeg, 1e-12);
     EXPECT_NEAR(a.roll, -50 * kDeg, 1e-12);
   }
-}
-
-TEST(Dlkf, InitialisesFromTheFirstSampleForAnyHeadingAndStaysOnAStaticSensor) {
-  for (double yaw : {-179.0, -120.0, -45.0, 0.0, 60.0, 135.0, 180.0}) {
-    DlkfFilter f;
-    const Quat q = from_yaw_pitch_roll({yaw * kDeg, -25 * kDeg, 40 * kDeg});
-    ASSERT_EQ(f.update(static_sample(q, 0)), UpdateResult::kInitialised);
-    EXPECT_LT(angle_between(f.orientation(), q), 1e-9) << yaw;
-    EXPECT_TRUE(f.flags().reinitialised);
-    for (std::uint64_t k = 1; k <= 500; ++k)
-      ASSERT_EQ(f.update(static_sample(q, k * 10 * kMs)), UpdateResult::kUpdated);
-    EXPECT_LT(angle_between(f.orientation(), q), 1e-9) << yaw;
-    EXPECT_TRUE(f.flags().resting);
-    EXPECT_FALSE(f.flags().initialising);
-  }
-}
-
-// Static accuracy with sensor noise and a gyro bias at every heading: the low-pass bias (Fan eqs. 11-12) learns the
-// bias after t_b = 2 s of rest, and the error stays well below a degree.
-TEST(Dlkf, StaticAccuracyAnyHeadingWithNoiseAndBias) {
-  for (double yaw : {-150.0, -30.0, 90.0, 170.0}) {
-    DlkfFilter f;
-    const Quat q = from_yaw_pitch_roll({yaw * kDeg, 5 * kDeg, -10 * kDeg});
-    const Vec3 bias(0.01, -0.008, 0.005);
-    std::mt19937_64 rng(42);
-    std::normal_distribution<double> g(0.0, 1.0);
-    auto n3 = [&] { return Vec3(g(rng), g(rng), g(rng)); };
-    double sq = 0;
-    int count = 0;
-    for (std::uint64_t k = 0; k <= 6000; ++k) {
-      ImuSample s = static_sample(q, k * 10 * kMs);
-      s.acc += 0.02 * n3();
-      s.mag += 0.2 * n3();
-      s.gyr = bias + 0.003 * n3();
-      f.update(s);
-      if (k > 4000) {
-        sq += std::pow(angle_between(f.orientation(), q), 2);
-        ++count;
-      }
-    }
-    EXPECT_LT(std::sqrt(sq / count), 0.5 * kDeg) << yaw;
-    EXPECT_LT((f.gyro_bias() - bias).norm(), 1e-3) << yaw;
-  }
-}
-
-// Fan test B with all magnetic adaption off: roll and pitch come from the gravity filter alone (TRIAD, gravity
-// first), so they stay within 0.1 deg; the yaw is pulled (the disturbance is felt).
-TEST(Dlkf, FanTestBMagnetDoesNotMoveRollAndPitch) {
-  DlkfFilter::Params p;
-  p.mag_rejection = 0.0;
-  DlkfFilter f(p);
-  const Quat q = from_yaw_pitch_roll({70 * kDeg, 12 * kDeg, -20 * kDeg});
-  double max_tilt_dev = 0, max_yaw_dev = 0;
-  for (std::uint64_t k = 0; k <= 3000; ++k) {
-    ImuSample s = static_sample(q, k * 10 * kMs);
-    s.mag += magnet_field(0.01 * static_cast<double>(k));
-    f.update(s);
-    const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
-    max_tilt_dev = std::max({max_tilt_dev, std::abs(est.pitch - 12 * kDeg), std::abs(est.roll + 20 * kDeg)});
-    max_yaw_dev = std::max(max_yaw_dev, std::abs(est.yaw - 70 * kDeg));
-  }
-  EXPECT_LT(max_tilt_dev, 0.1 * kDeg);
-  EXPECT_GT(max_yaw_dev, 1.0 * kDeg);
 }
 
 // Consistency of both linear filters: N independent runs of a sensor turning about all axes with exactly the noise
@@ -142,20 +82,6 @@ TEST(Dlkf, BothFiltersConsistentNeesOnLongSimulatedRuns) {
   RecordProperty("mean_nees_magnetic", std::to_string(nees_m / runs));
 }
 
-TEST(Dlkf, CovariancesStaySymmetricPositiveDefinite) {
-  DlkfFilter f;
-  RotatingSensor sensor(3, 0.005, {0.01, 1e-3, 0.5, 1.0}, Quat::Identity(), Vec3(0.01, 0, 0), 6.0);
-  f.update(sensor.first());
-  for (int k = 0; k < 8000; ++k) {
-    f.update(sensor.next());
-    for (const dlkf::Mat6* p : {&f.gravity_covariance(), &f.magnetic_covariance()}) {
-      // Exactly symmetric by construction: the filter clamps only the variances and never symmetrises.
-      ASSERT_TRUE(*p == p->transpose()) << k;
-      ASSERT_EQ(p->llt().info(), Eigen::Success) << k;
-    }
-  }
-}
-
 // SplitKalman processes the three axes as sequential scalar updates; with R diagonal that is the batch update
 // K = P H^T S^-1, x += K (y - H x), P = (I - K H) P (I - K H)^T + K R K^T, up to rounding.
 TEST(Dlkf, SequentialScalarCorrectionEqualsTheBatchUpdate) {
@@ -179,20 +105,6 @@ TEST(Dlkf, SequentialScalarCorrectionEqualsTheBatchUpdate) {
   }
 }
 
-TEST(Dlkf, SlowerMagnetometerAndSixDSamples) {
-  DlkfFilter f;
-  RotatingSensor sensor(11, 0.01, {1e-3, 0.0, 0.05, 0.3}, from_yaw_pitch_roll({2.0, 0.1, 0.3}), Vec3::Zero());
-  f.update(sensor.first());
-  double worst = 0;
-  for (int k = 1; k <= 6000; ++k) {
-    ImuSample s = sensor.next();
-    s.has_mag = (k % 4 == 0) && k < 3000;  // 25 Hz magnetometer, then none for 30 s
-    ASSERT_EQ(f.update(s), UpdateResult::kUpdated);
-    if (k > 1000) worst = std::max(worst, angle_between(f.orientation(), sensor.q()));
-  }
-  EXPECT_LT(worst, 2.0 * kDeg);
-}
-
 TEST(Dlkf, StartsWithoutMagnetometerAndTakesTheHeadingFromTheFirstOne) {
   DlkfFilter f;
   const Quat q = from_yaw_pitch_roll({-2.0, 0.2, 0.1});
@@ -202,41 +114,6 @@ TEST(Dlkf, StartsWithoutMagnetometerAndTakesTheHeadingFromTheFirstOne) {
   EXPECT_NEAR(to_yaw_pitch_roll(f.orientation()).yaw, 0.0, 1e-9);
   f.update(static_sample(q, 10 * kMs));
   EXPECT_LT(angle_between(f.orientation(), q), 1e-6);
-}
-
-TEST(Dlkf, BadInputNeverTouchesTheState) {
-  DlkfFilter f;
-  const Quat q = from_yaw_pitch_roll({1.0, 0.2, -0.3});
-  f.update(static_sample(q, 0));
-  f.update(static_sample(q, 10 * kMs));
-  const DlkfFilter::State before = f.state();
-  ImuSample bad = static_sample(q, 20 * kMs);
-  bad.acc.y() = std::nan("");
-  EXPECT_EQ(f.update(bad), UpdateResult::kRejected);
-  EXPECT_EQ(f.update(static_sample(q, 10 * kMs)), UpdateResult::kRejected);
-  EXPECT_EQ(f.update(static_sample(q, 5 * kMs)), UpdateResult::kRejected);
-  EXPECT_EQ(f.state().q.coeffs(), before.q.coeffs());
-  EXPECT_EQ(f.state().gravity.p, before.gravity.p);
-  EXPECT_EQ(f.state().magnetic.x, before.magnetic.x);
-  EXPECT_EQ(f.update(static_sample(q, 10 * kMs + 5'000 * kMs)), UpdateResult::kInitialised);
-  EXPECT_TRUE(f.flags().reinitialised);
-  ImuSample wild = static_sample(q, 10 * kMs + 5'900 * kMs);
-  wild.gyr = Vec3(1e6, -1e6, 1e6);
-  wild.acc = Vec3(1e9, 0, -1e9);
-  wild.mag = Vec3(1e9, 1e9, 0);
-  f.update(wild);
-  EXPECT_TRUE(f.orientation().coeffs().allFinite());
-  EXPECT_TRUE(f.gravity_covariance().allFinite());
-  EXPECT_TRUE(f.magnetic_covariance().allFinite());
-}
-
-TEST(Dlkf, FactoryMakesItAndChecksParameters) {
-  auto f = make_filter({"dlkf", {{"sigma_ext_acc", 2.0}}});
-  EXPECT_EQ(f->name(), "dlkf");
-  EXPECT_EQ(dynamic_cast<DlkfFilter&>(*f).params().sigma_ext_acc, 2.0);
-  EXPECT_THROW(make_filter({"dlkf", {{"tau_ext_acc_s", 0}}}), std::invalid_argument);
-  EXPECT_THROW(make_filter({"dlkf", {{"gyro_bias_lowpass", 2}}}), std::invalid_argument);
-  EXPECT_THROW(make_filter({"dlkf", {{"no_such", 1}}}), std::invalid_argument);
 }
 
 }  // namespace
