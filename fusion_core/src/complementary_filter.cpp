@@ -1,27 +1,27 @@
 #include "bsn/fusion/complementary_filter.hpp"
 
+#include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 
 namespace bsn::fusion {
 namespace {
 
 constexpr const char* kName = "complementary";
 
-constexpr ParamField<ComplementaryFilter::Params> kParams[] = {
-    {"tau_acc_s", &ComplementaryFilter::Params::tau_acc_s},
-    {"tau_mag_s", &ComplementaryFilter::Params::tau_mag_s},
-    {"max_gap_s", &ComplementaryFilter::Params::max_gap_s},
-    {"acc_rejection_m_s2", &ComplementaryFilter::Params::acc_rejection_m_s2},
-    {"mag_norm_tolerance", &ComplementaryFilter::Params::mag_norm_tolerance},
-    {"rest_gyr_rad_s", &ComplementaryFilter::Params::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &ComplementaryFilter::Params::rest_acc_m_s2},
-    {"rest_min_s", &ComplementaryFilter::Params::rest_min_s},
-    {"init_period_s", &ComplementaryFilter::Params::init_period_s},
-};
+using P = ComplementaryFilter::Params;
+constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
+                                               {"tau_acc_s", &P::tau_acc_s},
+                                               {"tau_mag_s", &P::tau_mag_s},
+                                               {"acc_rejection_m_s2", &P::acc_rejection_m_s2},
+                                               {"mag_norm_tolerance", &P::mag_norm_tolerance},
+                                           }),
+                                           rest_param_fields<P>(), timing_param_fields<P>());
 
 std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
 
@@ -47,17 +47,13 @@ double atan2_over_y(double y, double x) {
 
 }  // namespace
 
-ComplementaryFilter::ComplementaryFilter(const Params& params)
-    : params_(params), rest_({params.rest_gyr_rad_s, params.rest_acc_m_s2, params.rest_min_s}) {
+ComplementaryFilter::ComplementaryFilter(const Params& params) : params_(params), rest_(params) {
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
-  require_positive(kName, params.max_gap_s, "max_gap_s");
   require_positive(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
   require_positive(kName, params.mag_norm_tolerance, "mag_norm_tolerance");
-  require_positive(kName, params.rest_gyr_rad_s, "rest_gyr_rad_s");
-  require_positive(kName, params.rest_acc_m_s2, "rest_acc_m_s2");
-  require_positive(kName, params.rest_min_s, "rest_min_s");
-  require_positive(kName, params.init_period_s, "init_period_s");
+  params.RestDetector::Params::check(kName);
+  params.FilterTimingParams::check(kName);
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
@@ -65,19 +61,16 @@ ComplementaryFilter::ComplementaryFilter(const Params& params)
 }
 
 UpdateResult ComplementaryFilter::initialise(const ImuSample& s) {
-  // An orientation needs at least the direction of gravity.
-  if (!s.has_acc || s.acc.norm() < 1e-6) return UpdateResult::kRejected;
-  const bool mag_usable =
-      s.has_mag && s.mag.cross(s.acc).norm() > 1e-6 * s.mag.norm() * s.acc.norm() && s.mag.norm() > 1e-9;
-  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  // An orientation needs at least the direction of gravity. Any field not parallel to it gives a heading.
+  const std::optional<StartOrientation> start = start_orientation(s, 1e-6);
+  if (!start) return UpdateResult::kRejected;
+  const bool mag_usable = start->with_mag;
+  state_.q = start->q;
   state_.mag_ref_norm = mag_usable ? s.mag.norm() : 0.0;
   state_.initialised = true;
   state_.last_ns = s.timestamp_ns;
   state_.init_ns = s.timestamp_ns;
-  state_.flags = FilterFlags{};
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  state_.flags = start_flags(s.has_mag && !mag_usable);
   rest_.reset();
   return UpdateResult::kInitialised;
 }

@@ -1,11 +1,14 @@
 #include "bsn/fusion/dlkf_filter.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 #include "kalman_support.hpp"
 
 namespace bsn::fusion {
@@ -20,31 +23,23 @@ using dlkf::Vec6;
 // Keeps Q positive definite along v, where a rotation does not move the vector.
 constexpr double kMinProcessVariance = 1e-14;
 
-constexpr ParamField<DlkfFilter::Params> kParams[] = {
-    {"sigma_g", &DlkfFilter::Params::sigma_g},
-    {"sigma_a", &DlkfFilter::Params::sigma_a},
-    {"sigma_ext_acc", &DlkfFilter::Params::sigma_ext_acc},
-    {"tau_ext_acc_s", &DlkfFilter::Params::tau_ext_acc_s},
-    {"acc_rejection_m_s2", &DlkfFilter::Params::acc_rejection_m_s2},
-    {"sigma_m", &DlkfFilter::Params::sigma_m},
-    {"sigma_mag_disturbance", &DlkfFilter::Params::sigma_mag_disturbance},
-    {"tau_mag_disturbance_s", &DlkfFilter::Params::tau_mag_disturbance_s},
-    {"gyro_bias_lowpass", &DlkfFilter::Params::gyro_bias_lowpass},
-    {"bias_corner_frequency_hz", &DlkfFilter::Params::bias_corner_frequency_hz},
-    {"bias_omega_min_rad_s", &DlkfFilter::Params::bias_omega_min_rad_s},
-    {"bias_min_static_s", &DlkfFilter::Params::bias_min_static_s},
-    {"mag_rejection", &DlkfFilter::Params::mag_rejection},
-    {"mag_magnitude_enter", &DlkfFilter::Params::mag_magnitude_enter},
-    {"mag_magnitude_exit", &DlkfFilter::Params::mag_magnitude_exit},
-    {"mag_dip_enter_rad", &DlkfFilter::Params::mag_dip_enter_rad},
-    {"mag_dip_exit_rad", &DlkfFilter::Params::mag_dip_exit_rad},
-    {"mag_min_clean_s", &DlkfFilter::Params::mag_min_clean_s},
-    {"max_gap_s", &DlkfFilter::Params::max_gap_s},
-    {"rest_gyr_rad_s", &DlkfFilter::Params::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &DlkfFilter::Params::rest_acc_m_s2},
-    {"rest_min_s", &DlkfFilter::Params::rest_min_s},
-    {"init_period_s", &DlkfFilter::Params::init_period_s},
-};
+using P = DlkfFilter::Params;
+constexpr auto kParams =
+    join_param_fields(std::to_array<ParamField<P>>({
+                          {"sigma_g", &P::sigma_g},
+                          {"sigma_a", &P::sigma_a},
+                          {"sigma_ext_acc", &P::sigma_ext_acc},
+                          {"tau_ext_acc_s", &P::tau_ext_acc_s},
+                          {"acc_rejection_m_s2", &P::acc_rejection_m_s2},
+                          {"sigma_m", &P::sigma_m},
+                          {"sigma_mag_disturbance", &P::sigma_mag_disturbance},
+                          {"tau_mag_disturbance_s", &P::tau_mag_disturbance_s},
+                          {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
+                          {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
+                          {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
+                          {"bias_min_static_s", &P::bias_min_static_s},
+                      }),
+                      r_adaption_param_fields<P>(), timing_param_fields<P>(), rest_param_fields<P>());
 
 bool is_switch(double v) { return v == 0.0 || v == 1.0; }
 
@@ -148,8 +143,7 @@ Quat DlkfFilter::triad(const Vec3& up, const Vec3& field) {
 DlkfFilter::DlkfFilter(const Params& params)
     : params_(params),
       bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}),
-      r_adaption_({params.mag_magnitude_enter, params.mag_magnitude_exit, params.mag_dip_enter_rad,
-                   params.mag_dip_exit_rad, params.mag_min_clean_s}) {
+      r_adaption_(params.thresholds()) {
   require_positive(kName, params.sigma_g, "sigma_g");
   require_positive(kName, params.sigma_a, "sigma_a");
   require_positive(kName, params.sigma_ext_acc, "sigma_ext_acc");
@@ -159,13 +153,10 @@ DlkfFilter::DlkfFilter(const Params& params)
   require_positive(kName, params.sigma_mag_disturbance, "sigma_mag_disturbance");
   require_positive(kName, params.tau_mag_disturbance_s, "tau_mag_disturbance_s");
   if (!is_switch(params.gyro_bias_lowpass)) throw std::invalid_argument("dlkf: gyro_bias_lowpass must be 0 or 1");
-  if (!is_switch(params.mag_rejection)) throw std::invalid_argument("dlkf: mag_rejection must be 0 or 1");
-  require_positive(kName, params.max_gap_s, "max_gap_s");
+  params.RAdaptionFilterParams::check(kName);
+  params.FilterTimingParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("dlkf: max_gap_s must be <= 60 s");
-  require_positive(kName, params.rest_gyr_rad_s, "rest_gyr_rad_s");
-  require_positive(kName, params.rest_acc_m_s2, "rest_acc_m_s2");
-  require_positive(kName, params.rest_min_s, "rest_min_s");
-  require_positive(kName, params.init_period_s, "init_period_s");
+  params.RestDetector::Params::check(kName);
   coeff_.var_g = params.sigma_g * params.sigma_g;
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_ext = params.sigma_ext_acc * params.sigma_ext_acc;
@@ -196,16 +187,16 @@ void DlkfFilter::initialise_magnetic(const Vec3& mag) {
 }
 
 UpdateResult DlkfFilter::initialise(const ImuSample& s) {
-  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
-  const bool mag_usable = s.has_mag && kalman_support::acc_mag_usable(s.acc, s.mag);
+  const std::optional<StartOrientation> start = start_orientation(s);
+  if (!start) return UpdateResult::kRejected;
+  const bool mag_usable = start->with_mag;
   reset();
   state_.gravity.initialise(s.acc, coeff_.var_a, coeff_.var_ext);
   if (mag_usable) {
     initialise_magnetic(s.mag);
   } else {
     // No heading reference yet: carry earth north (zero yaw) with the gyro until a magnetometer sample arrives.
-    const Quat q0 = orientation_from_acc(s.acc);
-    state_.magnetic.initialise(q0.conjugate() * Vec3::UnitY(), coeff_.var_m, coeff_.var_dist);
+    state_.magnetic.initialise(start->q.conjugate() * Vec3::UnitY(), coeff_.var_m, coeff_.var_dist);
   }
   state_.q = triad(state_.gravity.vector(), state_.magnetic.vector());
   state_.gyr_prev = s.gyr;
@@ -213,9 +204,7 @@ UpdateResult DlkfFilter::initialise(const ImuSample& s) {
   state_.initialised = true;
   state_.last_ns = s.timestamp_ns;
   state_.init_ns = s.timestamp_ns;
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  state_.flags = start_flags(s.has_mag && !mag_usable);
   return UpdateResult::kInitialised;
 }
 

@@ -1,10 +1,13 @@
 #include "bsn/fusion/ekf_filter.hpp"
 
+#include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 #include "kalman_support.hpp"
 
 namespace bsn::fusion {
@@ -21,25 +24,15 @@ using Mat7 = EkfFilter::Mat7;
 // Keeps the covariance positive definite along the (unobservable) norm direction of the quaternion.
 constexpr double kNormDirectionVariance = 1e-12;
 
-constexpr ParamField<EkfFilter::Params> kParams[] = {
-    {"sigma_g", &EkfFilter::Params::sigma_g},
-    {"sigma_bg", &EkfFilter::Params::sigma_bg},
-    {"sigma_a", &EkfFilter::Params::sigma_a},
-    {"sigma_m", &EkfFilter::Params::sigma_m},
-    {"init_attitude_sigma_rad", &EkfFilter::Params::init_attitude_sigma_rad},
-    {"init_bias_sigma_rad_s", &EkfFilter::Params::init_bias_sigma_rad_s},
-    {"mag_rejection", &EkfFilter::Params::mag_rejection},
-    {"mag_magnitude_enter", &EkfFilter::Params::mag_magnitude_enter},
-    {"mag_magnitude_exit", &EkfFilter::Params::mag_magnitude_exit},
-    {"mag_dip_enter_rad", &EkfFilter::Params::mag_dip_enter_rad},
-    {"mag_dip_exit_rad", &EkfFilter::Params::mag_dip_exit_rad},
-    {"mag_min_clean_s", &EkfFilter::Params::mag_min_clean_s},
-    {"max_gap_s", &EkfFilter::Params::max_gap_s},
-    {"rest_gyr_rad_s", &EkfFilter::Params::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &EkfFilter::Params::rest_acc_m_s2},
-    {"rest_min_s", &EkfFilter::Params::rest_min_s},
-    {"init_period_s", &EkfFilter::Params::init_period_s},
-};
+using P = EkfFilter::Params;
+constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
+                                               {"sigma_g", &P::sigma_g},
+                                               {"sigma_bg", &P::sigma_bg},
+                                               {"sigma_a", &P::sigma_a},
+                                               {"sigma_m", &P::sigma_m},
+                                           }),
+                                           kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
+                                           timing_param_fields<P>(), rest_param_fields<P>());
 
 // q (x) (0, v) = xi(q) v.
 Mat43 xi(const Quat& q) {
@@ -72,27 +65,18 @@ Mat34 rotate_to_sensor_jacobian(const Quat& q, const Vec3& v) {
   return j;
 }
 
-bool is_switch(double v) { return v == 0.0 || v == 1.0; }
-
 }  // namespace
 
-EkfFilter::EkfFilter(const Params& params)
-    : params_(params),
-      r_adaption_({params.mag_magnitude_enter, params.mag_magnitude_exit, params.mag_dip_enter_rad,
-                   params.mag_dip_exit_rad, params.mag_min_clean_s}) {
+EkfFilter::EkfFilter(const Params& params) : params_(params), r_adaption_(params.thresholds()) {
   require_positive(kName, params.sigma_g, "sigma_g");
   require_positive(kName, params.sigma_bg, "sigma_bg");
   require_positive(kName, params.sigma_a, "sigma_a");
   require_positive(kName, params.sigma_m, "sigma_m");
-  require_positive(kName, params.init_attitude_sigma_rad, "init_attitude_sigma_rad");
-  require_positive(kName, params.init_bias_sigma_rad_s, "init_bias_sigma_rad_s");
-  if (!is_switch(params.mag_rejection)) throw std::invalid_argument("ekf: parameter mag_rejection must be 0 or 1");
-  require_positive(kName, params.max_gap_s, "max_gap_s");
+  params.KalmanInitParams::check(kName);
+  params.RAdaptionFilterParams::check(kName);
+  params.FilterTimingParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("ekf: max_gap_s must be <= 60 s");
-  require_positive(kName, params.rest_gyr_rad_s, "rest_gyr_rad_s");
-  require_positive(kName, params.rest_acc_m_s2, "rest_acc_m_s2");
-  require_positive(kName, params.rest_min_s, "rest_min_s");
-  require_positive(kName, params.init_period_s, "init_period_s");
+  params.RestDetector::Params::check(kName);
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_m = params.sigma_m * params.sigma_m;
   coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
@@ -120,10 +104,11 @@ void EkfFilter::set_reference(const Vec3& mag_earth) {
 }
 
 UpdateResult EkfFilter::initialise(const ImuSample& s) {
-  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
-  const bool mag_usable = s.has_mag && kalman_support::acc_mag_usable(s.acc, s.mag);
+  const std::optional<StartOrientation> start = start_orientation(s);
+  if (!start) return UpdateResult::kRejected;
+  const bool mag_usable = start->with_mag;
   reset();
-  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  state_.q = start->q;
   if (mag_usable) set_reference(state_.q * s.mag);
   const Mat43 x = xi(state_.q);
   const Eigen::Vector4d qv = as_vector(state_.q);
@@ -137,9 +122,7 @@ UpdateResult EkfFilter::initialise(const ImuSample& s) {
   state_.initialised = true;
   state_.last_ns = s.timestamp_ns;
   state_.init_ns = s.timestamp_ns;
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  state_.flags = start_flags(s.has_mag && !mag_usable);
   return UpdateResult::kInitialised;
 }
 

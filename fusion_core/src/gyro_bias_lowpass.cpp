@@ -8,11 +8,11 @@
 namespace bsn::fusion {
 
 GyroBiasLowPass::GyroBiasLowPass(const Params& params) : params_(params) {
-  require_positive("gyro bias low-pass", params.corner_frequency_hz, "bias_corner_frequency_hz");
-  require_positive("gyro bias low-pass", params.omega_min_rad_s, "bias_omega_min_rad_s");
-  require_positive("gyro bias low-pass", params.min_static_s, "bias_min_static_s");
-  omega_c_ = 2.0 * std::numbers::pi * params.corner_frequency_hz;
-  min_static_ns_ = static_cast<std::uint64_t>(std::llround(params.min_static_s * 1e9));
+  require_positive("gyro bias low-pass", params.bias_corner_frequency_hz, "bias_corner_frequency_hz");
+  require_positive("gyro bias low-pass", params.bias_omega_min_rad_s, "bias_omega_min_rad_s");
+  require_positive("gyro bias low-pass", params.bias_min_static_s, "bias_min_static_s");
+  omega_c_ = 2.0 * std::numbers::pi * params.bias_corner_frequency_hz;
+  min_static_ns_ = static_cast<std::uint64_t>(std::llround(params.bias_min_static_s * 1e9));
 }
 
 void GyroBiasLowPass::cache_gain(double dt) {

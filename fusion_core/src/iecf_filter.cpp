@@ -1,34 +1,25 @@
 #include "bsn/fusion/iecf_filter.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <optional>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 
 namespace bsn::fusion {
 namespace {
 
 using P = IecfFilter::Params;
-constexpr ParamField<P> kParams[] = {
-    {"gain", &P::gain},
-    {"initial_gain", &P::initial_gain},
-    {"init_period_s", &P::init_period_s},
-    {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
-    {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
-    {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
-    {"bias_min_static_s", &P::bias_min_static_s},
-    {"mag_rejection", &P::mag_rejection},
-    {"mag_norm_enter", &P::mag_norm_enter},
-    {"mag_norm_leave", &P::mag_norm_leave},
-    {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
-    {"mag_dip_leave_rad", &P::mag_dip_leave_rad},
-    {"mag_min_clean_s", &P::mag_min_clean_s},
-    {"max_gap_s", &P::max_gap_s},
-    {"rest_gyr_rad_s", &P::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &P::rest_acc_m_s2},
-    {"rest_min_s", &P::rest_min_s},
-};
+constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
+                                               {"gain", &P::gain},
+                                               {"initial_gain", &P::initial_gain},
+                                               {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
+                                               {"mag_rejection", &P::mag_rejection},
+                                           }),
+                                           bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
+                                           rest_param_fields<P>(), timing_param_fields<P>());
 
 std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
 
@@ -42,8 +33,7 @@ void require_switch(std::string_view name, double value, const char* param) {
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.gain, "gain");
   require_positive(name, p.initial_gain, "initial_gain");
-  require_positive(name, p.init_period_s, "init_period_s");
-  require_positive(name, p.max_gap_s, "max_gap_s");
+  p.FilterTimingParams::check(name);
   require_switch(name, p.gyro_bias_lowpass, "gyro_bias_lowpass");
   require_switch(name, p.mag_rejection, "mag_rejection");
   return p;
@@ -54,10 +44,9 @@ const P& checked(const P& p, std::string_view name) {
 IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
     : params_(checked(params, use_magnetometer ? "iecf" : "iecf6")),
       use_magnetometer_(use_magnetometer),
-      rest_({params.rest_gyr_rad_s, params.rest_acc_m_s2, params.rest_min_s}),
-      bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}),
-      mag_detector_({params.mag_norm_enter, params.mag_norm_leave, params.mag_dip_enter_rad, params.mag_dip_leave_rad,
-                     params.mag_min_clean_s}) {
+      rest_(params),
+      bias_(params),
+      mag_detector_(params) {
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
   coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
   // |gain e dt| <= gain (|e_a| + weight |e_m|) dt <= gain (dt + max_gap_s) <= 2 gain max_gap_s (unit crosses).
@@ -78,21 +67,18 @@ void IecfFilter::reset() {
 }
 
 UpdateResult IecfFilter::initialise(const ImuSample& s) {
-  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
   // IECF6 too takes its initial heading from the magnetometer when there is one (Fan's IECF6 "with the
   // alignment of the initial yaw angle"); afterwards it never reads it again.
-  const bool with_mag = s.has_mag && s.mag.norm() > 1e-9 && s.acc.norm() > 1e-6 &&
-                        s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
-  state_.q = with_mag ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  const std::optional<StartOrientation> start = start_orientation(s);
+  if (!start) return UpdateResult::kRejected;
+  const bool with_mag = start->with_mag;
+  state_.q = start->q;
   state_.initialised = true;
   state_.heading_known = with_mag;
   state_.last_ns = s.timestamp_ns;
   state_.last_mag_ns = with_mag ? s.timestamp_ns : 0;
   state_.init_ns = s.timestamp_ns;
-  state_.flags = FilterFlags{};
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
+  state_.flags = start_flags(use_magnetometer_ && s.has_mag && !with_mag);
   rest_.reset();
   mag_detector_.reset();
   if (with_mag && use_magnetometer_) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());
@@ -127,7 +113,8 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
     const Vec3 a = s.acc * (1.0 / std::sqrt(acc_squared_norm));
     const Vec3 up_est = earth_axis_in_sensor(q, 2);
     error += a.cross(up_est);  // e_a: measured x predicted up
-    // mag_usable(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, a unit.
+    // heading_from_mag_possible(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, a
+    // unit.
     const double mag_squared_norm = use_magnetometer_ && s.has_mag ? s.mag.squaredNorm() : 0.0;
     const Vec3 m_cross_a = s.mag.cross(a);
     const double m_cross_a_squared_norm = m_cross_a.squaredNorm();

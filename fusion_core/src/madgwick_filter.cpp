@@ -1,50 +1,40 @@
 #include "bsn/fusion/madgwick_filter.hpp"
 
+#include <array>
 #include <cmath>
+#include <optional>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 
 namespace bsn::fusion {
 namespace {
 
 using P = MadgwickFilter::Params;
-constexpr ParamField<P> kParams[] = {
-    {"beta", &P::beta},
-    {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
-    {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
-    {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
-    {"bias_min_static_s", &P::bias_min_static_s},
-    {"max_gap_s", &P::max_gap_s},
-    {"rest_gyr_rad_s", &P::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &P::rest_acc_m_s2},
-    {"rest_min_s", &P::rest_min_s},
-    {"init_period_s", &P::init_period_s},
-};
+constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
+                                               {"beta", &P::beta},
+                                               {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
+                                           }),
+                                           bias_param_fields<P>(), rest_param_fields<P>(), timing_param_fields<P>());
 
 std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
 
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.beta, "beta");
-  require_positive(name, p.max_gap_s, "max_gap_s");
-  require_positive(name, p.init_period_s, "init_period_s");
+  p.FilterTimingParams::check(name);
   if (p.gyro_bias_lowpass != 0.0 && p.gyro_bias_lowpass != 1.0) {
     throw std::invalid_argument(std::string(name) + ": parameter gyro_bias_lowpass must be 0 or 1, got " +
                                 std::to_string(p.gyro_bias_lowpass));
   }
   return p;
 }
-
-bool mag_usable(const ImuSample& s) {
-  return s.has_mag && s.has_acc && s.mag.norm() > 1e-9 && s.acc.norm() > 1e-6 &&
-         s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
-}
 }  // namespace
 
 MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
     : params_(checked(params, use_magnetometer ? "madgwick" : "madgwick6")),
       use_magnetometer_(use_magnetometer),
-      rest_({params.rest_gyr_rad_s, params.rest_acc_m_s2, params.rest_min_s}),
-      bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}) {
+      rest_(params),
+      bias_(params) {
   coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
   coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
 }
@@ -94,18 +84,16 @@ void MadgwickFilter::reset() {
 }
 
 UpdateResult MadgwickFilter::initialise(const ImuSample& s) {
-  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
   // The 6D variant too takes its initial heading from the magnetometer when there is one (an absolute start,
   // as Fan's IECF6 with its initial yaw aligned); afterwards it never reads it again.
-  const bool with_mag = mag_usable(s);
-  state_.q = with_mag ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  const std::optional<StartOrientation> start = start_orientation(s);
+  if (!start) return UpdateResult::kRejected;
+  const bool with_mag = start->with_mag;
+  state_.q = start->q;
   state_.initialised = true;
   state_.last_ns = s.timestamp_ns;
   state_.init_ns = s.timestamp_ns;
-  state_.flags = FilterFlags{};
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
+  state_.flags = start_flags(use_magnetometer_ && s.has_mag && !with_mag);
   state_.held_mag = with_mag && use_magnetometer_ ? s.mag : Vec3::Zero();
   state_.held_mag_ns = with_mag && use_magnetometer_ ? s.timestamp_ns : 0;
   rest_.reset();
@@ -140,7 +128,7 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
   const Vec3 acc_unit = acc_usable ? Vec3(s.acc * (1.0 / std::sqrt(acc_squared_norm))) : Vec3::Zero();
   bool with_mag = false;
   if (use_magnetometer_ && s.has_mag && acc_usable) {
-    // mag_usable(): |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, with a unit.
+    // heading_from_mag_possible(): |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, with a unit.
     const double mag_squared_norm = s.mag.squaredNorm();
     with_mag = mag_squared_norm > 1e-18 && s.mag.cross(acc_unit).squaredNorm() > 1e-6 * mag_squared_norm;
     if (with_mag) held_mag = s.mag;

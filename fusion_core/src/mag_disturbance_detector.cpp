@@ -10,17 +10,17 @@ namespace bsn::fusion {
 
 MagDisturbanceDetector::MagDisturbanceDetector(const Params& params) : params_(params) {
   constexpr const char* kName = "magnetic disturbance detector";
-  require_positive(kName, params.norm_enter, "mag_norm_enter");
-  require_positive(kName, params.norm_leave, "mag_norm_leave");
-  require_positive(kName, params.dip_enter_rad, "mag_dip_enter_rad");
-  require_positive(kName, params.dip_leave_rad, "mag_dip_leave_rad");
-  require_positive(kName, params.min_clean_s, "mag_min_clean_s");
-  if (params.norm_leave > params.norm_enter || params.dip_leave_rad > params.dip_enter_rad) {
+  require_positive(kName, params.mag_norm_enter, "mag_norm_enter");
+  require_positive(kName, params.mag_norm_leave, "mag_norm_leave");
+  require_positive(kName, params.mag_dip_enter_rad, "mag_dip_enter_rad");
+  require_positive(kName, params.mag_dip_leave_rad, "mag_dip_leave_rad");
+  require_positive(kName, params.mag_min_clean_s, "mag_min_clean_s");
+  if (params.mag_norm_leave > params.mag_norm_enter || params.mag_dip_leave_rad > params.mag_dip_enter_rad) {
     throw std::invalid_argument(std::string(kName) +
                                 ": a leave threshold must not exceed its enter threshold (mag_norm_leave <= "
                                 "mag_norm_enter, mag_dip_leave_rad <= mag_dip_enter_rad)");
   }
-  min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.min_clean_s * 1e9));
+  min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.mag_min_clean_s * 1e9));
 }
 
 double MagDisturbanceDetector::dip_angle(const Vec3& m, const Vec3& up) {
@@ -47,14 +47,14 @@ void MagDisturbanceDetector::set_reference(double norm_uT, double dip_rad) {
   state_.ref_norm = state_.reference_known ? norm_uT : 0.0;
   state_.ref_dip = state_.reference_known ? dip_rad : 0.0;
   const double ref = state_.ref_norm, dip = state_.ref_dip;
-  bounds_.norm_enter_low = ref * (1.0 - params_.norm_enter);
-  bounds_.norm_enter_high = ref * (1.0 + params_.norm_enter);
-  bounds_.norm_leave_low = ref * (1.0 - params_.norm_leave);
-  bounds_.norm_leave_high = ref * (1.0 + params_.norm_leave);
-  bounds_.sin_enter_low = sine_bound(dip - params_.dip_enter_rad, false);
-  bounds_.sin_enter_high = sine_bound(dip + params_.dip_enter_rad, true);
-  bounds_.sin_leave_low = sine_bound(dip - params_.dip_leave_rad, true);
-  bounds_.sin_leave_high = sine_bound(dip + params_.dip_leave_rad, false);
+  bounds_.norm_enter_low = ref * (1.0 - params_.mag_norm_enter);
+  bounds_.norm_enter_high = ref * (1.0 + params_.mag_norm_enter);
+  bounds_.norm_leave_low = ref * (1.0 - params_.mag_norm_leave);
+  bounds_.norm_leave_high = ref * (1.0 + params_.mag_norm_leave);
+  bounds_.sin_enter_low = sine_bound(dip - params_.mag_dip_enter_rad, false);
+  bounds_.sin_enter_high = sine_bound(dip + params_.mag_dip_enter_rad, true);
+  bounds_.sin_leave_low = sine_bound(dip - params_.mag_dip_leave_rad, true);
+  bounds_.sin_leave_high = sine_bound(dip + params_.mag_dip_leave_rad, false);
 }
 
 double MagDisturbanceDetector::last_norm_deviation() const {

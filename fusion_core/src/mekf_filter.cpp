@@ -1,10 +1,13 @@
 #include "bsn/fusion/mekf_filter.hpp"
 
+#include <array>
 #include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 #include "kalman_support.hpp"
 
 namespace bsn::fusion {
@@ -14,43 +17,29 @@ using kalman_support::skew;
 using mekf::Mat3;
 using mekf::Mat6;
 
-constexpr ParamField<MekfFilter::Params> kParams[] = {
-    {"preset", &MekfFilter::Params::preset},
-    {"sigma_g", &MekfFilter::Params::sigma_g},
-    {"sigma_bg", &MekfFilter::Params::sigma_bg},
-    {"sigma_a", &MekfFilter::Params::sigma_a},
-    {"sigma_m", &MekfFilter::Params::sigma_m},
-    {"init_attitude_sigma_rad", &MekfFilter::Params::init_attitude_sigma_rad},
-    {"init_bias_sigma_rad_s", &MekfFilter::Params::init_bias_sigma_rad_s},
-    {"mag_rejection", &MekfFilter::Params::mag_rejection},
-    {"mag_magnitude_enter", &MekfFilter::Params::mag_magnitude_enter},
-    {"mag_magnitude_exit", &MekfFilter::Params::mag_magnitude_exit},
-    {"mag_dip_enter_rad", &MekfFilter::Params::mag_dip_enter_rad},
-    {"mag_dip_exit_rad", &MekfFilter::Params::mag_dip_exit_rad},
-    {"mag_min_clean_s", &MekfFilter::Params::mag_min_clean_s},
-    {"max_gap_s", &MekfFilter::Params::max_gap_s},
-    {"rest_gyr_rad_s", &MekfFilter::Params::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &MekfFilter::Params::rest_acc_m_s2},
-    {"rest_min_s", &MekfFilter::Params::rest_min_s},
-    {"init_period_s", &MekfFilter::Params::init_period_s},
-    {"static_gyr_rad_s", &MekfFilter::Params::static_gyr_rad_s},
-    {"static_acc_m_s2", &MekfFilter::Params::static_acc_m_s2},
-    {"slow_gyr_rad_s", &MekfFilter::Params::slow_gyr_rad_s},
-    {"slow_acc_m_s2", &MekfFilter::Params::slow_acc_m_s2},
-    {"intermediate_gyr_rad_s", &MekfFilter::Params::intermediate_gyr_rad_s},
-    {"intermediate_acc_m_s2", &MekfFilter::Params::intermediate_acc_m_s2},
-    {"intensity_hold_s", &MekfFilter::Params::intensity_hold_s},
-    {"min_switch_interval_s", &MekfFilter::Params::min_switch_interval_s},
-    {"switch_confirm_s", &MekfFilter::Params::switch_confirm_s},
-    {"table_rate_hz", &MekfFilter::Params::table_rate_hz},
-};
+using P = MekfFilter::Params;
+constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
+                                               {"preset", &P::preset},
+                                               {"sigma_g", &P::sigma_g},
+                                               {"sigma_bg", &P::sigma_bg},
+                                               {"sigma_a", &P::sigma_a},
+                                               {"sigma_m", &P::sigma_m},
+                                               {"static_gyr_rad_s", &P::static_gyr_rad_s},
+                                               {"static_acc_m_s2", &P::static_acc_m_s2},
+                                               {"slow_gyr_rad_s", &P::slow_gyr_rad_s},
+                                               {"slow_acc_m_s2", &P::slow_acc_m_s2},
+                                               {"intermediate_gyr_rad_s", &P::intermediate_gyr_rad_s},
+                                               {"intermediate_acc_m_s2", &P::intermediate_acc_m_s2},
+                                               {"intensity_hold_s", &P::intensity_hold_s},
+                                               {"min_switch_interval_s", &P::min_switch_interval_s},
+                                               {"switch_confirm_s", &P::switch_confirm_s},
+                                               {"table_rate_hz", &P::table_rate_hz},
+                                           }),
+                                           kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
+                                           timing_param_fields<P>(), rest_param_fields<P>());
 
 // Below this rotation angle per step the closed forms lose digits to cancellation; their Taylor series are used.
 constexpr double kSeriesAngle = 0.05;
-
-MagneticRAdaption::Params r_adaption_params(const MekfFilter::Params& p) {
-  return {p.mag_magnitude_enter, p.mag_magnitude_exit, p.mag_dip_enter_rad, p.mag_dip_exit_rad, p.mag_min_clean_s};
-}
 
 int preset_index(std::string_view filter, double preset) {
   if (!(preset == 0.0 || preset == 1.0 || preset == 2.0 || preset == 3.0)) {
@@ -61,8 +50,6 @@ int preset_index(std::string_view filter, double preset) {
   }
   return static_cast<int>(preset);
 }
-
-bool is_switch(double v) { return v == 0.0 || v == 1.0; }
 
 }  // namespace
 
@@ -149,7 +136,7 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg) {
 }  // namespace mekf
 
 MekfFilter::MekfFilter(const Params& params, bool adaptive)
-    : params_(params), adaptive_(adaptive), r_adaption_(r_adaption_params(params)) {
+    : params_(params), adaptive_(adaptive), r_adaption_(params.thresholds()) {
   const std::string_view n = adaptive ? "mekf_adaptive" : "mekf";
   coeff_.start_intensity = preset_index(n, params.preset);
   coeff_.noise = kNezTable3[static_cast<std::size_t>(coeff_.start_intensity)];
@@ -166,16 +153,10 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
       *targets[i] = overrides[i];
     }
   }
-  require_positive(n, params.init_attitude_sigma_rad, "init_attitude_sigma_rad");
-  require_positive(n, params.init_bias_sigma_rad_s, "init_bias_sigma_rad_s");
-  if (!is_switch(params.mag_rejection)) {
-    throw std::invalid_argument(std::string(n) + ": parameter mag_rejection must be 0 or 1");
-  }
-  require_positive(n, params.max_gap_s, "max_gap_s");
-  require_positive(n, params.rest_gyr_rad_s, "rest_gyr_rad_s");
-  require_positive(n, params.rest_acc_m_s2, "rest_acc_m_s2");
-  require_positive(n, params.rest_min_s, "rest_min_s");
-  require_positive(n, params.init_period_s, "init_period_s");
+  params.KalmanInitParams::check(n);
+  params.RAdaptionFilterParams::check(n);
+  params.FilterTimingParams::check(n);
+  params.RestDetector::Params::check(n);
   require_positive(n, params.static_gyr_rad_s, "static_gyr_rad_s");
   require_positive(n, params.static_acc_m_s2, "static_acc_m_s2");
   require_positive(n, params.slow_gyr_rad_s, "slow_gyr_rad_s");
@@ -220,10 +201,11 @@ void MekfFilter::set_reference(const Vec3& mag_earth) {
 }
 
 UpdateResult MekfFilter::initialise(const ImuSample& s) {
-  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
-  const bool mag_usable = s.has_mag && kalman_support::acc_mag_usable(s.acc, s.mag);
+  const std::optional<StartOrientation> start = start_orientation(s);
+  if (!start) return UpdateResult::kRejected;
+  const bool mag_usable = start->with_mag;
   reset();
-  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  state_.q = start->q;
   if (mag_usable) set_reference(state_.q * s.mag);
   state_.p.setZero();
   state_.p.topLeftCorner<3, 3>().diagonal().setConstant(params_.init_attitude_sigma_rad *
@@ -234,9 +216,7 @@ UpdateResult MekfFilter::initialise(const ImuSample& s) {
   state_.last_ns = s.timestamp_ns;
   state_.init_ns = s.timestamp_ns;
   state_.last_switch_ns = s.timestamp_ns;
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  state_.flags = start_flags(s.has_mag && !mag_usable);
   return UpdateResult::kInitialised;
 }
 

@@ -7,14 +7,12 @@
 namespace bsn::fusion {
 
 RestDetector::RestDetector(const Params& params) : params_(params) {
-  require_positive("rest detector", params.gyr_threshold_rad_s, "rest_gyr_rad_s");
-  require_positive("rest detector", params.acc_threshold_m_s2, "rest_acc_m_s2");
-  require_positive("rest detector", params.min_duration_s, "rest_min_s");
-  min_duration_ns_ = static_cast<std::uint64_t>(std::llround(params.min_duration_s * 1e9));
-  gyr_threshold_sq_ = params.gyr_threshold_rad_s * params.gyr_threshold_rad_s;
-  const double acc_low = kGravity - params.acc_threshold_m_s2;
+  params.check("rest detector");
+  min_duration_ns_ = static_cast<std::uint64_t>(std::llround(params.rest_min_s * 1e9));
+  gyr_threshold_sq_ = params.rest_gyr_rad_s * params.rest_gyr_rad_s;
+  const double acc_low = kGravity - params.rest_acc_m_s2;
   acc_low_sq_ = acc_low < 0.0 ? -1.0 : acc_low * acc_low;  // below zero: every |acc| is above the lower bound
-  const double acc_high = kGravity + params.acc_threshold_m_s2;
+  const double acc_high = kGravity + params.rest_acc_m_s2;
   acc_high_sq_ = acc_high * acc_high;
 }
 

@@ -1,10 +1,13 @@
 #include "bsn/fusion/seel_ruppin_filter.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
+#include <optional>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 
 namespace bsn::fusion {
 namespace {
@@ -12,39 +15,22 @@ namespace {
 constexpr const char* kName = "seel_ruppin";
 
 using P = SeelRuppinFilter::Params;
-constexpr ParamField<P> kParams[] = {
-    {"tau_acc_s", &P::tau_acc_s},
-    {"tau_mag_s", &P::tau_mag_s},
-    {"zeta", &P::zeta},
-    {"max_acc_error_rad", &P::max_acc_error_rad},
-    {"acc_lowpass_tau_s", &P::acc_lowpass_tau_s},
-    {"rest_bias_lowpass", &P::rest_bias_lowpass},
-    {"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
-    {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
-    {"bias_min_static_s", &P::bias_min_static_s},
-    {"max_gyro_bias_rad_s", &P::max_gyro_bias_rad_s},
-    {"max_gap_s", &P::max_gap_s},
-    {"mag_rejection", &P::mag_rejection},
-    {"mag_norm_enter", &P::mag_norm_enter},
-    {"mag_norm_leave", &P::mag_norm_leave},
-    {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
-    {"mag_dip_leave_rad", &P::mag_dip_leave_rad},
-    {"mag_min_clean_s", &P::mag_min_clean_s},
-    {"mag_reference_s", &P::mag_reference_s},
-    {"mag_max_rejection_s", &P::mag_max_rejection_s},
-    {"rest_gyr_rad_s", &P::rest_gyr_rad_s},
-    {"rest_acc_m_s2", &P::rest_acc_m_s2},
-    {"rest_min_s", &P::rest_min_s},
-    {"init_period_s", &P::init_period_s},
-};
+constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
+                                               {"tau_acc_s", &P::tau_acc_s},
+                                               {"tau_mag_s", &P::tau_mag_s},
+                                               {"zeta", &P::zeta},
+                                               {"max_acc_error_rad", &P::max_acc_error_rad},
+                                               {"acc_lowpass_tau_s", &P::acc_lowpass_tau_s},
+                                               {"rest_bias_lowpass", &P::rest_bias_lowpass},
+                                               {"max_gyro_bias_rad_s", &P::max_gyro_bias_rad_s},
+                                               {"mag_rejection", &P::mag_rejection},
+                                               {"mag_reference_s", &P::mag_reference_s},
+                                               {"mag_max_rejection_s", &P::mag_max_rejection_s},
+                                           }),
+                                           bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
+                                           rest_param_fields<P>(), timing_param_fields<P>());
 
 std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
-
-RestDetector::Params rest_params(const P& p) { return {p.rest_gyr_rad_s, p.rest_acc_m_s2, p.rest_min_s}; }
-
-MagDisturbanceDetector::Params mag_params(const P& p) {
-  return {p.mag_norm_enter, p.mag_norm_leave, p.mag_dip_enter_rad, p.mag_dip_leave_rad, p.mag_min_clean_s};
-}
 
 const P& checked(const P& p) {
   require_positive(kName, p.tau_acc_s, "tau_acc_s");
@@ -52,9 +38,8 @@ const P& checked(const P& p) {
   require_non_negative(kName, p.zeta, "zeta");
   require_positive(kName, p.max_gyro_bias_rad_s, "max_gyro_bias_rad_s");
   require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
-  require_positive(kName, p.max_gap_s, "max_gap_s");
   require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
-  require_positive(kName, p.init_period_s, "init_period_s");
+  p.FilterTimingParams::check(kName);
   require_positive(kName, p.mag_reference_s, "mag_reference_s");
   require_positive(kName, p.mag_max_rejection_s, "mag_max_rejection_s");
   for (const auto& [value, name] :
@@ -111,10 +96,7 @@ double signed_angle(const Vec3& v, const Vec3& w, const Vec3& n) { return atan2_
 }  // namespace
 
 SeelRuppinFilter::SeelRuppinFilter(const Params& params)
-    : params_(checked(params)),
-      rest_(rest_params(params)),
-      mag_detector_(mag_params(params)),
-      rest_bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}) {
+    : params_(checked(params)), rest_(params), mag_detector_(params), rest_bias_(params) {
   coeff_.tau_acc_14 = 1.4 * params.tau_acc_s;
   coeff_.tau_mag_14 = 1.4 * params.tau_mag_s;
   coeff_.tau_start_mag_14 = 1.4 * std::min(params.tau_mag_s, params.tau_acc_s);
@@ -184,10 +166,10 @@ void SeelRuppinFilter::reset() {
 }
 
 UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
-  if (!s.has_acc || !(s.acc.norm() > 1e-6)) return UpdateResult::kRejected;
-  const bool mag_usable =
-      s.has_mag && s.mag.norm() > 1e-9 && s.mag.cross(s.acc).norm() > 1e-3 * s.mag.norm() * s.acc.norm();
-  state_.q = mag_usable ? orientation_from_acc_mag(s.acc, s.mag) : orientation_from_acc(s.acc);
+  const std::optional<StartOrientation> start = start_orientation(s);
+  if (!start) return UpdateResult::kRejected;
+  const bool mag_usable = start->with_mag;
+  state_.q = start->q;
   state_.q_gyr = Quat::Identity();
   state_.acc_lp_s1 = state_.acc_lp_s2 = Vec3::Zero();
   state_.acc_lp_warmup_s = 0.0;
@@ -198,10 +180,7 @@ UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
   state_.last_ns = s.timestamp_ns;
   state_.last_mag_ns = mag_usable ? s.timestamp_ns : 0;
   state_.init_ns = s.timestamp_ns;
-  state_.flags = FilterFlags{};
-  state_.flags.initialising = true;
-  state_.flags.reinitialised = true;
-  state_.flags.mag_rejected = s.has_mag && !mag_usable;
+  state_.flags = start_flags(s.has_mag && !mag_usable);
   rest_.reset();
   start_mag_reference(s.timestamp_ns);
   state_.flags.resting = rest_.update(s);

@@ -105,8 +105,8 @@ TEST(MagDisturbanceDetector, TwoThresholdsDoNotChatterWhereOneDoes) {
     return changes;
   };
   MagDisturbanceDetector::Params single;
-  single.norm_enter = single.norm_leave = 0.08;
-  single.min_clean_s = 1e-9;
+  single.mag_norm_enter = single.mag_norm_leave = 0.08;
+  single.mag_min_clean_s = 1e-9;
   EXPECT_GT(transitions(single), 100);
   EXPECT_EQ(transitions(MagDisturbanceDetector::Params{}), 1);  // enters once (a sample beyond 10 %), stays
 }

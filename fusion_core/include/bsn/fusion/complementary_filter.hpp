@@ -5,6 +5,7 @@
 
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rest_detector.hpp"
 
@@ -12,29 +13,19 @@ namespace bsn::fusion {
 
 class ComplementaryFilter final : public OrientationFilter {
  public:
-  struct Params {
+  /// Own fields below; rest detection and the gap and start-up timing come from the base structs (documented there).
+  struct Params : RestDetector::Params, FilterTimingParams {
     /// Time constant of the tilt correction towards the accelerometer, s. Larger trusts the gyro longer
     /// (less sensitive to accelerations), smaller removes gyro drift faster. Default 2 s.
     double tau_acc_s = 2.0;
     /// Time constant of the heading correction towards the magnetometer, s. Default 4 s.
     double tau_mag_s = 4.0;
-    /// A timestamp gap longer than this re-initialises from the accelerometer and magnetometer, s.
-    /// Shorter gaps are bridged by integrating the gyro over the gap. Default 1 s.
-    double max_gap_s = 1.0;
     /// The accelerometer is skipped when | |acc| - g | exceeds this, m/s^2 (strong external
     /// acceleration). Default 3 m/s^2.
     double acc_rejection_m_s2 = 3.0;
     /// The magnetometer is rejected when its norm differs from the norm at initialisation by more than this
     /// fraction (a magnetic disturbance). Default 0.2 (20 %).
     double mag_norm_tolerance = 0.2;
-    /// Rest detection: the sensor is resting when |gyr| stays below rest_gyr_rad_s (default 0.05 rad/s,
-    /// 2.9 deg/s) and | |acc| - g | below rest_acc_m_s2 (default 0.5 m/s^2) for at least rest_min_s
-    /// (default 1.5 s).
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
-    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
-    double init_period_s = 3.0;
   };
 
   /// Quantities derived once from Params.

@@ -14,9 +14,11 @@
 #include <cstdint>
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/gyro_bias_lowpass.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/r_adaption.hpp"
+#include "bsn/fusion/rest_detector.hpp"
 
 namespace bsn::fusion {
 
@@ -47,7 +49,9 @@ struct SplitKalman {
 
 class DlkfFilter final : public OrientationFilter {
  public:
-  struct Params {
+  /// Own fields below; R-adaption (its reference is the field at initialisation), rest flag and timing come from
+  /// the base structs (documented there). max_gap_s must be <= 60 s.
+  struct Params : RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
     /// Gyro noise density (global error, including scale and misalignment), rad/s per sqrt(Hz): the direction
     /// of each estimated vector diffuses with variance sigma_g^2 dt per step. Default 0.002, chosen with
     /// sigma_ext_acc on the eight BROAD trials (mean total RMSE 4.5 deg; 0.01 with sigma_ext_acc 0.5 gave 12 deg):
@@ -71,28 +75,12 @@ class DlkfFilter final : public OrientationFilter {
     double tau_mag_disturbance_s = 1.0;
     /// Low-pass gyro bias (Fan §2.3.3, eqs. 11-12): 1 = on (default), 0 = off; corner frequency (Hz, default
     /// 0.05), still threshold on every gyro component (rad/s, default 3 deg/s) and minimum still time (s, default 2).
+    /// Its own fields, not GyroBiasLowPass::Params: the still threshold's default is one ulp below the others'
+    /// (3 deg/s rounded differently), kept so the filter's output stays as it was.
     double gyro_bias_lowpass = 1.0;
     double bias_corner_frequency_hz = 0.05;
     double bias_omega_min_rad_s = 0.05235987755982988;
     double bias_min_static_s = 2.0;
-    /// Magnetometer R-adaption (Fan eq. 10): 1 = skip the magnetometer update while magnitude or dip deviate from
-    /// the values at initialisation; 0 = always use it (Fan's test B). Default 1. Thresholds as
-    /// MagneticRAdaption::Params (0.1 / 0.05, 10 / 5 deg, 0.2 s).
-    double mag_rejection = 1.0;
-    double mag_magnitude_enter = 0.1;
-    double mag_magnitude_exit = 0.05;
-    double mag_dip_enter_rad = 0.1745;
-    double mag_dip_exit_rad = 0.0873;
-    double mag_min_clean_s = 0.2;
-    /// A timestamp gap longer than this re-initialises from the sample, s. Default 1 s.
-    double max_gap_s = 1.0;
-    /// Rest detection: |gyr| < rest_gyr_rad_s (0.05 rad/s) and | |acc| - g | < rest_acc_m_s2 (0.5 m/s^2) for
-    /// rest_min_s (1.5 s).
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
-    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
-    double init_period_s = 3.0;
   };
 
   struct Coefficients {

@@ -10,8 +10,11 @@
 #include <cstdint>
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/kalman_params.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/r_adaption.hpp"
+#include "bsn/fusion/rest_detector.hpp"
 
 namespace bsn::fusion {
 
@@ -20,7 +23,9 @@ class EkfFilter final : public OrientationFilter {
   using Mat7 = Eigen::Matrix<double, 7, 7>;
   using Mat6 = Eigen::Matrix<double, 6, 6>;
 
-  struct Params {
+  /// Own fields below; initial covariance, R-adaption, rest flag and timing come from the base structs (documented
+  /// there). max_gap_s must be <= 60 s; a re-initialisation restarts the whole state.
+  struct Params : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
     /// Gyro white noise, rad/s per sqrt(Hz): the rotation-angle variance grows by sigma_g^2 * dt per step.
     /// Default 1e-3 (Nez Table 3, slow).
     double sigma_g = 1e-3;
@@ -32,28 +37,6 @@ class EkfFilter final : public OrientationFilter {
     double sigma_a = 2.0;
     /// Magnetometer measurement noise (including small disturbances), uT. Default 10 (see sigma_a).
     double sigma_m = 10.0;
-    /// Initial standard deviation of each attitude error component, rad. Default 0.1 rad.
-    double init_attitude_sigma_rad = 0.1;
-    /// Initial standard deviation of each gyro bias component, rad/s. Default 0.01 rad/s.
-    double init_bias_sigma_rad_s = 0.01;
-    /// Magnetometer R-adaption (Fan eq. 10): 1 = infinite magnetometer variance (a 3-D accelerometer-only update)
-    /// while magnitude or dip deviate; 0 = always use it (Fan's test B). Default 1.
-    double mag_rejection = 1.0;
-    /// R-adaption thresholds, see MagneticRAdaption::Params. Defaults 0.1 / 0.05, 10 / 5 deg, 0.2 s.
-    double mag_magnitude_enter = 0.1;
-    double mag_magnitude_exit = 0.05;
-    double mag_dip_enter_rad = 0.1745;
-    double mag_dip_exit_rad = 0.0873;
-    double mag_min_clean_s = 0.2;
-    /// A timestamp gap longer than this re-initialises from the sample, s. Default 1 s.
-    double max_gap_s = 1.0;
-    /// Rest detection: |gyr| < rest_gyr_rad_s (0.05 rad/s) and | |acc| - g | < rest_acc_m_s2 (0.5 m/s^2) for
-    /// rest_min_s (1.5 s).
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
-    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
-    double init_period_s = 3.0;
   };
 
   struct Coefficients {

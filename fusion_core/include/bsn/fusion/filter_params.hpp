@@ -1,6 +1,8 @@
 // Binding a filter's named parameters (the body model's `filter:` block) to its Params struct.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <cstddef>
 #include <limits>
 #include <stdexcept>
@@ -19,10 +21,21 @@ struct ParamField {
   double Params::*field;
 };
 
+/// A filter's parameter table: its own entries followed by the shared groups' (rest_param_fields() etc.), in
+/// the order given. The order is the one the "unknown parameter" message lists the names in.
+template <class Params, std::size_t... N>
+constexpr std::array<ParamField<Params>, (N + ...)> join_param_fields(
+    const std::array<ParamField<Params>, N>&... parts) {
+  std::array<ParamField<Params>, (N + ...)> all{};
+  auto out = all.begin();
+  ((out = std::copy(parts.begin(), parts.end(), out)), ...);
+  return all;
+}
+
 /// Applies spec.parameters to `params` (the defaults). Throws std::invalid_argument naming the filter, the
 /// unknown parameter and the known ones.
 template <class Params, std::size_t N>
-Params bind_parameters(std::string_view filter, const FilterSpec& spec, const ParamField<Params> (&fields)[N],
+Params bind_parameters(std::string_view filter, const FilterSpec& spec, const std::array<ParamField<Params>, N>& fields,
                        Params params = Params{}) {
   for (const auto& [key, value] : spec.parameters) {
     bool known = false;
@@ -56,6 +69,29 @@ inline void require_non_negative(std::string_view filter, double value, const ch
     throw std::invalid_argument(std::string(filter) + ": parameter " + name + " must be a finite value >= 0, got " +
                                 std::to_string(value));
   }
+}
+
+/// Re-initialisation and start-up timing, the same in every filter; each filter's Params derives from it, so the
+/// field names are the parameter names (timing_param_fields() lists them).
+struct FilterTimingParams {
+  /// A timestamp gap longer than this re-initialises the orientation from the sample (start_orientation()), s.
+  /// Shorter gaps are bridged with the gyro. Default 1 s.
+  double max_gap_s = 1.0;
+  /// After (re)initialisation the filter reports `initialising` for this long (the IECF's gain ramp and the
+  /// Seel-Ruppin start-up corrections last as long), s. Default 3 s.
+  double init_period_s = 3.0;
+
+  /// Throws std::invalid_argument, naming `owner`, unless both are finite and > 0.
+  void check(std::string_view owner) const {
+    require_positive(owner, max_gap_s, "max_gap_s");
+    require_positive(owner, init_period_s, "init_period_s");
+  }
+};
+
+/// The timing parameters' entries of a filter's parameter table (P derives from FilterTimingParams).
+template <class P>
+constexpr std::array<ParamField<P>, 2> timing_param_fields() {
+  return {{{"max_gap_s", &P::max_gap_s}, {"init_period_s", &P::init_period_s}}};
 }
 
 }  // namespace bsn::fusion

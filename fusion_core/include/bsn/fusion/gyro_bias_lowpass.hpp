@@ -7,23 +7,27 @@
 // implement exactly that: d(w_bias)/dt = 2 pi f_c * p * (w - w_bias), discretised exactly for any dt.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion {
 
 class GyroBiasLowPass {
  public:
+  /// Low-pass bias parameters. The Params of Madgwick, IECF and Seel-Ruppin derive from this struct, so the field
+  /// names are the filter parameter names (bias_param_fields() lists them); DLKF keeps its own copy (see there).
   struct Params {
     /// Corner frequency f_c of the low-pass, Hz. Default 0.05 Hz (Fan et al.): time constant 3.2 s.
-    double corner_frequency_hz = 0.05;
+    double bias_corner_frequency_hz = 0.05;
     /// omega_min: the sensor counts as still while every gyro component is below this, rad/s. Default
     /// 3 deg/s (Fan et al.).
-    double omega_min_rad_s = 3.0 * 0.017453292519943295;
+    double bias_omega_min_rad_s = 3.0 * 0.017453292519943295;
     /// t_b: minimum still time before the bias is updated, s. Default 2 s (Fan et al.).
-    double min_static_s = 2.0;
+    double bias_min_static_s = 2.0;
   };
 
   struct State {
@@ -42,7 +46,7 @@ class GyroBiasLowPass {
   EIGEN_ALWAYS_INLINE void update(std::uint64_t t_ns, double dt, const Vec3& gyr) {
     // Always inlined: every filter of the family calls it once per sample.
     // Every component below omega_min; NaN and Inf fail the comparison, so non-finite input is never still.
-    const double limit = params_.omega_min_rad_s;
+    const double limit = params_.bias_omega_min_rad_s;
     const bool still_now = std::abs(gyr.x()) < limit && std::abs(gyr.y()) < limit && std::abs(gyr.z()) < limit;
     if (!still_now) {
       state_.still = false;
@@ -74,5 +78,13 @@ class GyroBiasLowPass {
   double cached_gain_ = 0.0;  ///< 1 - exp(-omega_c dt) for cached_dt_
   State state_;
 };
+
+/// The low-pass bias parameters' entries of a filter's parameter table (P derives from GyroBiasLowPass::Params).
+template <class P>
+constexpr std::array<ParamField<P>, 3> bias_param_fields() {
+  return {{{"bias_corner_frequency_hz", &P::bias_corner_frequency_hz},
+           {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
+           {"bias_min_static_s", &P::bias_min_static_s}}};
+}
 
 }  // namespace bsn::fusion

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/gyro_bias_lowpass.hpp"
 #include "bsn/fusion/mag_disturbance_detector.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
@@ -22,36 +23,19 @@ namespace bsn::fusion {
 
 class IecfFilter final : public OrientationFilter {
  public:
-  struct Params {
+  /// Own fields below; the shared groups come from the base structs (documented there). init_period_s is also the
+  /// length of the start-up gain ramp; a re-initialisation after a gap keeps the bias estimate.
+  struct Params : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
     /// K: gain on the error after start-up, rad/s per unit error; the correction time constant is 1/K.
     /// Default 0.1 (10 s): the BROAD optimum (0.07-0.1 within 0.04 deg; Fan's 0.5 gives 4.4 deg instead of
     /// 3.1 deg mean total RMSE).
     double gain = 0.1;
     /// Gain right after (re)initialisation, ramping down to `gain` over init_period_s. Default 10.
     double initial_gain = 10.0;
-    /// Length of the start-up ramp and of the `initialising` flag, s. Default 3 s.
-    double init_period_s = 3.0;
     /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
     double gyro_bias_lowpass = 1.0;
-    /// Low-pass gyro bias: f_c in Hz, omega_min in rad/s, t_b in s. Defaults 0.05 Hz, 3 deg/s, 2 s (Fan).
-    double bias_corner_frequency_hz = 0.05;
-    double bias_omega_min_rad_s = 3.0 * 0.017453292519943295;
-    double bias_min_static_s = 2.0;
     /// 1 = skip the magnetometer while the disturbance detector flags it, 0 = always use it. Default 1.
     double mag_rejection = 1.0;
-    /// Magnetic-disturbance detector thresholds (see MagDisturbanceDetector). Defaults 0.10, 0.05, 0.14 rad,
-    /// 0.07 rad, 1 s.
-    double mag_norm_enter = 0.10;
-    double mag_norm_leave = 0.05;
-    double mag_dip_enter_rad = 0.14;
-    double mag_dip_leave_rad = 0.07;
-    double mag_min_clean_s = 1.0;
-    /// A timestamp gap longer than this re-initialises from acc + mag (bias kept), s. Default 1 s.
-    double max_gap_s = 1.0;
-    /// Rest detection (see RestDetector): rad/s, m/s^2, s. Defaults 0.05, 0.5, 1.5.
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
   };
 
   struct Coefficients {

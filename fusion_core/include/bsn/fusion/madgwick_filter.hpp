@@ -18,6 +18,7 @@
 #include <cstdint>
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/gyro_bias_lowpass.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rest_detector.hpp"
@@ -26,28 +27,16 @@ namespace bsn::fusion {
 
 class MadgwickFilter final : public OrientationFilter {
  public:
-  struct Params {
+  /// Own fields below; the shared groups come from the base structs (documented there). Between readings of a
+  /// magnetometer slower than the IMU, the 9D step uses the last reading turned by the gyro since then, for at most
+  /// max_gap_s, so the heading gain does not drop with the magnetometer rate.
+  struct Params : GyroBiasLowPass::Params, RestDetector::Params, FilterTimingParams {
     /// beta: magnitude of the gradient-descent step, rad/s (the quaternion rate of the correction; the
     /// orientation turns at up to 2 beta rad/s towards the measurements). Default 0.02: the BROAD optimum
     /// (flat from 0.015 to 0.02; Fan's 0.1 gives 4.5 deg instead of 3.2 deg mean total RMSE).
     double beta = 0.02;
     /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
     double gyro_bias_lowpass = 1.0;
-    /// Low-pass gyro bias (see GyroBiasLowPass): f_c in Hz, omega_min in rad/s, t_b in s. Defaults 0.05 Hz,
-    /// 3 deg/s, 2 s (Fan et al.).
-    double bias_corner_frequency_hz = 0.05;
-    double bias_omega_min_rad_s = 3.0 * 0.017453292519943295;
-    double bias_min_static_s = 2.0;
-    /// A timestamp gap longer than this re-initialises from acc + mag, s. Default 1 s. Between readings of a
-    /// magnetometer slower than the IMU, the 9D step uses the last reading turned by the gyro since then, for
-    /// at most this long, so the heading gain does not drop with the magnetometer rate.
-    double max_gap_s = 1.0;
-    /// Rest detection (see RestDetector): rad/s, m/s^2, s. Defaults 0.05, 0.5, 1.5.
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
-    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
-    double init_period_s = 3.0;
   };
 
   struct Coefficients {

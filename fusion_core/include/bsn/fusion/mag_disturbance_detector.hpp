@@ -9,25 +9,29 @@
 // (asin is monotonic), against bounds derived once when the reference is set.
 #pragma once
 
+#include <array>
 #include <cstdint>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion {
 
 class MagDisturbanceDetector {
  public:
+  /// Detector thresholds. The Params of a filter that uses the detector derive from this struct, so the field
+  /// names are the filter parameter names (mag_disturbance_param_fields() lists them).
   struct Params {
     /// Disturbed when | |m| - ref | / ref exceeds this fraction. Default 0.10.
-    double norm_enter = 0.10;
-    /// Clean again only below this fraction (<= norm_enter). Default 0.05 (Fan's test E threshold).
-    double norm_leave = 0.05;
+    double mag_norm_enter = 0.10;
+    /// Clean again only below this fraction (<= mag_norm_enter). Default 0.05 (Fan's test E threshold).
+    double mag_norm_leave = 0.05;
     /// Disturbed when |dip - ref_dip| exceeds this, rad. Default 0.14 rad (8 deg).
-    double dip_enter_rad = 0.14;
-    /// Clean again only below this, rad (<= dip_enter_rad). Default 0.07 rad (4 deg).
-    double dip_leave_rad = 0.07;
+    double mag_dip_enter_rad = 0.14;
+    /// Clean again only below this, rad (<= mag_dip_enter_rad). Default 0.07 rad (4 deg).
+    double mag_dip_leave_rad = 0.07;
     /// Both must stay inside the leave band this long before the field is trusted again, s. Default 1 s.
-    double min_clean_s = 1.0;
+    double mag_min_clean_s = 1.0;
   };
 
   struct State {
@@ -78,5 +82,15 @@ class MagDisturbanceDetector {
   Bounds bounds_;
   State state_;
 };
+
+/// The detector thresholds' entries of a filter's parameter table (P derives from MagDisturbanceDetector::Params).
+template <class P>
+constexpr std::array<ParamField<P>, 5> mag_disturbance_param_fields() {
+  return {{{"mag_norm_enter", &P::mag_norm_enter},
+           {"mag_norm_leave", &P::mag_norm_leave},
+           {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
+           {"mag_dip_leave_rad", &P::mag_dip_leave_rad},
+           {"mag_min_clean_s", &P::mag_min_clean_s}}};
+}
 
 }  // namespace bsn::fusion

@@ -21,8 +21,11 @@
 #include <cstdint>
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/kalman_params.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/r_adaption.hpp"
+#include "bsn/fusion/rest_detector.hpp"
 
 namespace bsn::fusion {
 
@@ -66,7 +69,9 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg);
 
 class MekfFilter final : public OrientationFilter {
  public:
-  struct Params {
+  /// Own fields below (the adaptive variant's at the end); initial covariance, R-adaption, rest flag and timing come
+  /// from the base structs (documented there). max_gap_s must be <= 60 s.
+  struct Params : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
     /// Table 3 set used for Q and R: 0 static, 1 slow, 2 intermediate, 3 fast. Default 3 (fast): measured on the
     /// eight BROAD trials (mean total RMSE 3.7 deg; intermediate 12.3 deg, slow 55 deg, static 74 deg). Table 3 was
     /// identified on other sensors at 128 Hz, and R is per sample, so the sets that trust the accelerometer
@@ -78,31 +83,6 @@ class MekfFilter final : public OrientationFilter {
     double sigma_bg = 0.0;
     double sigma_a = 0.0;
     double sigma_m = 0.0;
-    /// Initial standard deviation of each attitude error component, rad. Default 0.1 rad (5.7 deg): larger than
-    /// the error of the first TRIAD solution for accelerometer noise below ~1 m/s^2.
-    double init_attitude_sigma_rad = 0.1;
-    /// Initial standard deviation of each gyro bias component, rad/s. Default 0.01 rad/s (0.57 deg/s), a
-    /// typical turn-on bias of a calibrated MEMS gyro.
-    double init_bias_sigma_rad_s = 0.01;
-    /// Magnetometer R-adaption (Fan eq. 10): 1 = reject the magnetometer while magnitude or dip deviate
-    /// (thresholds below), 0 = always use it (as Nez; Fan's test B runs with it off). Default 1.
-    double mag_rejection = 1.0;
-    /// Thresholds of the R-adaption, see MagneticRAdaption::Params: relative magnitude (defaults 0.1 / 0.05),
-    /// dip angle in rad (defaults 0.1745 / 0.0873 = 10 / 5 deg) and the clean time before trusting it again (0.2 s).
-    double mag_magnitude_enter = 0.1;
-    double mag_magnitude_exit = 0.05;
-    double mag_dip_enter_rad = 0.1745;
-    double mag_dip_exit_rad = 0.0873;
-    double mag_min_clean_s = 0.2;
-    /// A timestamp gap longer than this re-initialises from the sample, s. Default 1 s.
-    double max_gap_s = 1.0;
-    /// Rest detection: |gyr| below rest_gyr_rad_s (default 0.05 rad/s) and | |acc| - g | below rest_acc_m_s2
-    /// (default 0.5 m/s^2) for at least rest_min_s (default 1.5 s).
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
-    /// After (re)initialisation the filter reports `initialising` for this long, s. Default 3 s.
-    double init_period_s = 3.0;
     // Adaptive variant only. Intensity thresholds at the upper end (mean + 1 standard deviation) of the classes of
     // Nez Table 1 (slow 0.03 +- 0.02 g / 40 +- 20 deg/s, intermediate 0.7 +- 0.5 g / 300 +- 150 deg/s): each set is
     // used only for motion within the range it was identified on. Static is below rest-like thresholds. A

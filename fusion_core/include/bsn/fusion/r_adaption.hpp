@@ -5,8 +5,14 @@
 // because a single threshold chatters (Fan §2.2.1 and §5.1).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <limits>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+
+#include "bsn/fusion/filter_params.hpp"
 
 namespace bsn::fusion {
 
@@ -64,5 +70,42 @@ class MagneticRAdaption {
   bool clean_since_valid_ = false;  ///< a clean period has started while disturbed_
   std::uint64_t clean_since_ns_ = 0;
 };
+
+/// The R-adaption parameters of a Kalman filter under their filter parameter names (the Params of EKF, MEKF and
+/// DLKF derive from this struct; r_adaption_param_fields() lists the names).
+struct RAdaptionFilterParams {
+  /// 1 = infinite magnetometer variance (the magnetometer is ignored) while the field's magnitude or dip deviates
+  /// from the reference (Fan eq. 10); 0 = always use it (Fan's test B). Default 1.
+  double mag_rejection = 1.0;
+  /// The thresholds of MagneticRAdaption::Params (meaning and defaults there): relative magnitude 0.1 / 0.05, dip
+  /// 0.1745 / 0.0873 rad (10 / 5 deg), clean time 0.2 s.
+  double mag_magnitude_enter = 0.1;
+  double mag_magnitude_exit = 0.05;
+  double mag_dip_enter_rad = 0.1745;
+  double mag_dip_exit_rad = 0.0873;
+  double mag_min_clean_s = 0.2;
+
+  MagneticRAdaption::Params thresholds() const {
+    return {mag_magnitude_enter, mag_magnitude_exit, mag_dip_enter_rad, mag_dip_exit_rad, mag_min_clean_s};
+  }
+  /// Throws std::invalid_argument, naming `owner`, unless mag_rejection is 0 or 1 (MagneticRAdaption checks the
+  /// thresholds).
+  void check(std::string_view owner) const {
+    if (mag_rejection != 0.0 && mag_rejection != 1.0) {
+      throw std::invalid_argument(std::string(owner) + ": parameter mag_rejection must be 0 or 1");
+    }
+  }
+};
+
+/// The R-adaption parameters' entries of a filter's parameter table (P derives from RAdaptionFilterParams).
+template <class P>
+constexpr std::array<ParamField<P>, 6> r_adaption_param_fields() {
+  return {{{"mag_rejection", &P::mag_rejection},
+           {"mag_magnitude_enter", &P::mag_magnitude_enter},
+           {"mag_magnitude_exit", &P::mag_magnitude_exit},
+           {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
+           {"mag_dip_exit_rad", &P::mag_dip_exit_rad},
+           {"mag_min_clean_s", &P::mag_min_clean_s}}};
+}
 
 }  // namespace bsn::fusion

@@ -2,22 +2,34 @@
 // below their thresholds for a minimum time. Any filter can own one; it only reads samples.
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/imu_sample.hpp"
 
 namespace bsn::fusion {
 
 class RestDetector {
  public:
+  /// Rest detection parameters. Every filter's Params derives from this struct, so the field names are the
+  /// filter parameter names (rest_param_fields() lists them).
   struct Params {
     /// |gyr| must stay below this, rad/s. Default 0.05 rad/s (2.9 deg/s): above the noise and residual bias
     /// of a MEMS gyro, below any deliberate human motion.
-    double gyr_threshold_rad_s = 0.05;
+    double rest_gyr_rad_s = 0.05;
     /// | |acc| - g | must stay below this, m/s^2. Default 0.5 m/s^2.
-    double acc_threshold_m_s2 = 0.5;
+    double rest_acc_m_s2 = 0.5;
     /// Both must hold for at least this long before `resting` is reported, s. Default 1.5 s.
-    double min_duration_s = 1.5;
+    double rest_min_s = 1.5;
+
+    /// Throws std::invalid_argument, naming `owner`, unless every field is finite and > 0.
+    void check(std::string_view owner) const {
+      require_positive(owner, rest_gyr_rad_s, "rest_gyr_rad_s");
+      require_positive(owner, rest_acc_m_s2, "rest_acc_m_s2");
+      require_positive(owner, rest_min_s, "rest_min_s");
+    }
   };
 
   struct State {
@@ -54,10 +66,17 @@ class RestDetector {
  private:
   Params params_;
   std::uint64_t min_duration_ns_ = 0;
-  double gyr_threshold_sq_ = 0.0;  ///< gyr_threshold^2, (rad/s)^2
-  double acc_low_sq_ = 0.0;        ///< (g - acc_threshold)^2, or -1 when g - acc_threshold < 0, (m/s^2)^2
-  double acc_high_sq_ = 0.0;       ///< (g + acc_threshold)^2, (m/s^2)^2
+  double gyr_threshold_sq_ = 0.0;  ///< rest_gyr^2, (rad/s)^2
+  double acc_low_sq_ = 0.0;        ///< (g - rest_acc)^2, or -1 when g - rest_acc < 0, (m/s^2)^2
+  double acc_high_sq_ = 0.0;       ///< (g + rest_acc)^2, (m/s^2)^2
   State state_;
 };
+
+/// The rest parameters' entries of a filter's parameter table (P derives from RestDetector::Params).
+template <class P>
+constexpr std::array<ParamField<P>, 3> rest_param_fields() {
+  return {
+      {{"rest_gyr_rad_s", &P::rest_gyr_rad_s}, {"rest_acc_m_s2", &P::rest_acc_m_s2}, {"rest_min_s", &P::rest_min_s}}};
+}
 
 }  // namespace bsn::fusion

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <string_view>
 
+#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/gyro_bias_lowpass.hpp"
 #include "bsn/fusion/mag_disturbance_detector.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
@@ -19,7 +20,11 @@ namespace bsn::fusion {
 
 class SeelRuppinFilter final : public OrientationFilter {
  public:
-  struct Params {
+  /// Own fields below; the shared groups come from the base structs (documented there). The bias low-pass acts
+  /// only with rest_bias_lowpass = 1. A re-initialisation after a gap resets the orientation only (the bias
+  /// belongs to the sensor). During the start-up period (init_period_s) the filter corrects the tilt without the
+  /// clip and the heading with tau_acc if that is shorter than tau_mag, and learns no bias.
+  struct Params : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
     /// tau_acc: half-value time of the convergence towards the accelerometer's inclination, s. Larger trusts
     /// the gyro longer, smaller removes tilt drift faster. With the acceleration low-pass on (the default) the
     /// low-pass already removes the accelerations of human motion, so this correction can be fast. Default
@@ -52,26 +57,12 @@ class SeelRuppinFilter final : public OrientationFilter {
     /// 0 = the paper's integral estimate only. The integral action learns a bias in minutes at human-motion
     /// zeta; real recordings start with a bias that rest removes in seconds. Default 1.
     double rest_bias_lowpass = 1.0;
-    /// Low-pass gyro bias at rest: f_c in Hz, omega_min in rad/s, t_b in s. Defaults 0.05 Hz, 3 deg/s, 2 s (Fan).
-    double bias_corner_frequency_hz = 0.05;
-    double bias_omega_min_rad_s = 3.0 * 0.017453292519943295;
-    double bias_min_static_s = 2.0;
     /// The bias estimate is clamped to this magnitude per axis, rad/s (a safety net against runaway on bad
     /// data). Default 0.1 rad/s (5.7 deg/s).
     double max_gyro_bias_rad_s = 0.1;
-    /// A timestamp gap longer than this re-initialises the orientation from acc + mag (the bias estimate is
-    /// kept: it belongs to the sensor), s. Shorter gaps are bridged with the gyro. Default 1 s.
-    double max_gap_s = 1.0;
     /// 1 = skip the magnetometer while the disturbance detector flags it; 0 = always use it (the paper's
     /// filter). Default 1.
     double mag_rejection = 1.0;
-    /// Magnetic-disturbance detector thresholds (see MagDisturbanceDetector): fractions of the reference
-    /// magnitude, dip angles in rad, duration in s. Defaults 0.10, 0.05, 0.14 rad, 0.07 rad, 1 s.
-    double mag_norm_enter = 0.10;
-    double mag_norm_leave = 0.05;
-    double mag_dip_enter_rad = 0.14;
-    double mag_dip_leave_rad = 0.07;
-    double mag_min_clean_s = 1.0;
     /// The detector's reference field (magnitude and dip) is the mean over this long after (re)initialisation,
     /// with the estimated vertical, s; the magnetometer is used unchecked meanwhile. One reading would carry its
     /// noise, and a start in motion its wrong vertical, into every later decision. Default 3 s.
@@ -81,14 +72,6 @@ class SeelRuppinFilter final : public OrientationFilter {
     /// magnet) would shut the magnetometer out for good; a field that keeps changing, like that of a magnet
     /// moving with or near the sensor, is never adopted. Default 20 s.
     double mag_max_rejection_s = 20.0;
-    /// Rest detection (see RestDetector): rad/s, m/s^2, s. Defaults 0.05, 0.5, 1.5.
-    double rest_gyr_rad_s = 0.05;
-    double rest_acc_m_s2 = 0.5;
-    double rest_min_s = 1.5;
-    /// Start-up period after (re)initialisation, s: the filter reports `initialising`, corrects the tilt
-    /// without the clip and the heading with tau_acc if that is shorter than tau_mag, and learns no bias.
-    /// Default 3 s.
-    double init_period_s = 3.0;
   };
 
   /// Quantities derived once from Params.
