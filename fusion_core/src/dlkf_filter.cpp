@@ -168,14 +168,15 @@ DlkfFilter::DlkfFilter(const Params& params)
   coeff_.acc_accept_min2 = acc_low * acc_low;
   coeff_.acc_accept_max2 = (kGravity + params.acc_rejection_m_s2) * (kGravity + params.acc_rejection_m_s2);
   coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
-  coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
   coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
+  rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
 void DlkfFilter::reset() {
   state_ = State{};
   bias_.reset();
   r_adaption_.reset();
+  rest_.reset();
 }
 
 void DlkfFilter::initialise_magnetic(const Vec3& mag) {
@@ -279,8 +280,7 @@ UpdateResult DlkfFilter::update(const ImuSample& s) {
   const Vec3 h = state_.magnetic.vector();
   if (up.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad_from_unit_up(up, h);
 
-  state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
-                                                     params_.rest_acc_m_s2, coeff_.rest_min_ns);
+  state_.flags.resting = rest_.update(s);
   state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
 }

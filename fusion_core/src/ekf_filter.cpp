@@ -80,13 +80,14 @@ EkfFilter::EkfFilter(const Params& params) : params_(params), r_adaption_(params
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_m = params.sigma_m * params.sigma_m;
   coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
-  coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
   coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
+  rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
 void EkfFilter::reset() {
   state_ = State{};
   r_adaption_.reset();
+  rest_.reset();
 }
 
 EkfFilter::Mat6 EkfFilter::error_covariance() const {
@@ -260,8 +261,7 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
   state_.p.bottomLeftCorner<3, 4>() = state_.p.topRightCorner<4, 3>().transpose();
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
 
-  state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
-                                                     params_.rest_acc_m_s2, coeff_.rest_min_ns);
+  state_.flags.resting = rest_.update(s);
   state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
 }

@@ -54,24 +54,6 @@ inline double cos_dip_deviation(double sin_dip, double sin_dip_ref, double cos_d
   return std::sqrt(std::max(0.0, 1.0 - sin_dip * sin_dip)) * cos_dip_ref + sin_dip * sin_dip_ref;
 }
 
-/// The rest flag: gyro norm and accelerometer deviation from g below thresholds for at least min_ns. still and
-/// still_since_ns are the caller's state.
-inline bool update_rest(bool& still, std::uint64_t& still_since_ns, const ImuSample& s, double gyr_max, double acc_max,
-                        std::uint64_t min_ns) {
-  // |gyr| < gyr_max and | |acc| - g | < acc_max, compared squared (no square roots).
-  const double acc2 = s.acc.squaredNorm();
-  const double acc_low = std::max(kGravity - acc_max, 0.0), acc_high = kGravity + acc_max;
-  const bool still_now = s.has_gyr && s.has_acc && s.gyr.squaredNorm() < gyr_max * gyr_max &&
-                         acc2 > acc_low * acc_low && acc2 < acc_high * acc_high;
-  if (!still_now) {
-    still = false;
-  } else if (!still) {
-    still = true;
-    still_since_ns = s.timestamp_ns;
-  }
-  return still && s.timestamp_ns - still_since_ns >= min_ns;
-}
-
 /// Makes a covariance symmetric and clamps its diagonal away from zero and from overflow, so that rounding never
 /// lets it lose positive definiteness.
 template <class Mat>

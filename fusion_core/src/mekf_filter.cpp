@@ -173,19 +173,20 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   }
   if (params.max_gap_s > 60.0) throw std::invalid_argument(std::string(n) + ": max_gap_s must be <= 60 s");
   coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
-  coeff_.rest_min_ns = kalman_support::seconds_to_ns(params.rest_min_s);
   coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
   coeff_.intensity_hold_ns = kalman_support::seconds_to_ns(params.intensity_hold_s);
   coeff_.min_switch_interval_ns = kalman_support::seconds_to_ns(params.min_switch_interval_s);
   coeff_.switch_confirm_ns = kalman_support::seconds_to_ns(params.switch_confirm_s);
   coeff_.bias_cap_time_s = std::max(params.min_switch_interval_s, 1.0);
   reset();
+  rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
 void MekfFilter::reset() {
   state_ = State{};
   state_.intensity = coeff_.start_intensity;
   r_adaption_.reset();
+  rest_.reset();
 }
 
 MekfNoise MekfFilter::noise() const {
@@ -408,8 +409,7 @@ UpdateResult MekfFilter::update(const ImuSample& s) {
 
   state_.q = kalman_support::unit(state_.q);
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
-  state_.flags.resting = kalman_support::update_rest(state_.still, state_.still_since_ns, s, params_.rest_gyr_rad_s,
-                                                     params_.rest_acc_m_s2, coeff_.rest_min_ns);
+  state_.flags.resting = rest_.update(s);
   state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
   return UpdateResult::kUpdated;
 }

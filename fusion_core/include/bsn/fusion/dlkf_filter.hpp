@@ -94,7 +94,6 @@ class DlkfFilter final : public OrientationFilter {
     double acc_accept_min2 = 0.0;  ///< (max(g - acc_rejection_m_s2, 0))^2: |acc|^2 range of the R-adaption
     double acc_accept_max2 = 0.0;  ///< (g + acc_rejection_m_s2)^2
     std::uint64_t max_gap_ns = 0;
-    std::uint64_t rest_min_ns = 0;
     std::uint64_t init_period_ns = 0;
   };
 
@@ -111,8 +110,6 @@ class DlkfFilter final : public OrientationFilter {
     bool initialised = false;
     std::uint64_t last_ns = 0;
     std::uint64_t init_ns = 0;
-    bool still = false;
-    std::uint64_t still_since_ns = 0;
     FilterFlags flags;
     double decay_dt = -1.0;   ///< the step the two decay factors below were computed for, s (cache)
     double decay_ext = 0.0;   ///< exp(-dt / tau_ext_acc)
@@ -148,6 +145,7 @@ class DlkfFilter final : public OrientationFilter {
   Coefficients coeff_;
   GyroBiasLowPass bias_;
   MagneticRAdaption r_adaption_;
+  RestDetector rest_;
   State state_;
 };
 

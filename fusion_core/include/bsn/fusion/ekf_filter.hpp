@@ -43,7 +43,6 @@ class EkfFilter final : public OrientationFilter {
     double var_a = 0.0;  ///< sigma_a^2
     double var_m = 0.0;  ///< sigma_m^2
     std::uint64_t max_gap_ns = 0;
-    std::uint64_t rest_min_ns = 0;
     std::uint64_t init_period_ns = 0;
   };
 
@@ -60,8 +59,6 @@ class EkfFilter final : public OrientationFilter {
     bool initialised = false;
     std::uint64_t last_ns = 0;
     std::uint64_t init_ns = 0;
-    bool still = false;
-    std::uint64_t still_since_ns = 0;
     FilterFlags flags;
   };
 
@@ -95,6 +92,7 @@ class EkfFilter final : public OrientationFilter {
   Params params_;
   Coefficients coeff_;
   MagneticRAdaption r_adaption_;
+  RestDetector rest_;
   State state_;
 };
 

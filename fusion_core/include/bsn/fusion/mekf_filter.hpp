@@ -119,7 +119,6 @@ class MekfFilter final : public OrientationFilter {
   struct Coefficients {
     MekfNoise noise;  ///< the fixed set (non-adaptive) or the starting set (adaptive)
     std::uint64_t max_gap_ns = 0;
-    std::uint64_t rest_min_ns = 0;
     std::uint64_t init_period_ns = 0;
     std::uint64_t intensity_hold_ns = 0;
     std::uint64_t min_switch_interval_ns = 0;
@@ -145,8 +144,6 @@ class MekfFilter final : public OrientationFilter {
     std::uint64_t last_switch_ns = 0;
     std::array<std::uint64_t, 4> class_seen_ns{};  ///< last time each intensity class was observed
     std::array<bool, 4> class_seen{};
-    bool still = false;  ///< rest detection: currently below the thresholds
-    std::uint64_t still_since_ns = 0;
     int switches = 0;                      ///< number of parameter-set switches since initialisation
     bool differing = false;                ///< the intensity currently differs from the set in use
     std::uint64_t differing_since_ns = 0;  ///< since when
@@ -187,6 +184,7 @@ class MekfFilter final : public OrientationFilter {
   bool adaptive_;
   Coefficients coeff_;
   MagneticRAdaption r_adaption_;
+  RestDetector rest_;
   State state_;
 };
 
