@@ -182,9 +182,7 @@ void DlkfFilter::reset() {
 void DlkfFilter::initialise_magnetic(const Vec3& mag) {
   state_.magnetic.initialise(mag, coeff_.var_m, coeff_.var_dist);
   state_.have_mag = true;
-  state_.mag_ref_norm = mag.norm();
-  state_.mag_ref_sin_dip = kalman_support::sin_dip(mag, state_.gravity.vector().normalized(), state_.mag_ref_norm);
-  state_.mag_ref_cos_dip = std::sqrt(1.0 - state_.mag_ref_sin_dip * state_.mag_ref_sin_dip);
+  state_.mag_ref = MagneticRAdaption::Reference::of(mag, state_.gravity.vector().normalized());
 }
 
 UpdateResult DlkfFilter::initialise(const ImuSample& s) {
@@ -258,11 +256,7 @@ UpdateResult DlkfFilter::update(const ImuSample& s) {
     } else {
       bool use = true;
       if (params_.mag_rejection != 0.0) {
-        const double mag_norm = s.mag.norm();
-        const double scale = r_adaption_.update_from_cosine(
-            s.timestamp_ns, mag_norm / state_.mag_ref_norm,
-            kalman_support::cos_dip_deviation(kalman_support::sin_dip(s.mag, up, mag_norm), state_.mag_ref_sin_dip,
-                                              state_.mag_ref_cos_dip));
+        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.mag_ref);
         use = std::isfinite(scale);
       }
       if (use) {

@@ -99,9 +99,7 @@ EkfFilter::Mat6 EkfFilter::error_covariance() const {
 
 void EkfFilter::set_reference(const Vec3& mag_earth) {
   state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
-  state_.h_ref_norm = state_.h_ref.norm();
-  state_.h_ref_sin_dip = kalman_support::sin_dip(state_.h_ref, Vec3::UnitZ(), state_.h_ref_norm);
-  state_.h_ref_cos_dip = std::sqrt(1.0 - state_.h_ref_sin_dip * state_.h_ref_sin_dip);
+  state_.h_ref_judged = MagneticRAdaption::Reference::of(state_.h_ref, Vec3::UnitZ());
 }
 
 UpdateResult EkfFilter::initialise(const ImuSample& s) {
@@ -217,11 +215,7 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
     } else {
       use_mag = true;
       if (params_.mag_rejection != 0.0) {
-        const double mag_norm = s.mag.norm();
-        const double scale = r_adaption_.update_from_cosine(
-            s.timestamp_ns, mag_norm / state_.h_ref_norm,
-            kalman_support::cos_dip_deviation(kalman_support::sin_dip(s.mag, up, mag_norm), state_.h_ref_sin_dip,
-                                              state_.h_ref_cos_dip));
+        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged);
         use_mag = std::isfinite(scale);
         state_.flags.mag_rejected = !use_mag;
       }

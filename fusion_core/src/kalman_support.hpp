@@ -41,19 +41,6 @@ inline bool acc_mag_usable(const Vec3& acc, const Vec3& mag) {
   return na2 > 1e-12 && nm2 > 1e-18 && acc.cross(mag).squaredNorm() > 1e-6 * na2 * nm2;
 }
 
-/// Sine of the dip angle of the field m below the horizontal plane whose upward normal is up (unit), positive
-/// downwards (Fan eq. 17 with the estimated vertical), for |m| = m_norm: -m.up / |m| clamped to [-1, 1]; 0 for a
-/// zero field.
-inline double sin_dip(const Vec3& m, const Vec3& up, double m_norm) {
-  return m_norm > 0.0 ? std::clamp(-m.dot(up) / m_norm, -1.0, 1.0) : 0.0;
-}
-
-/// cos(dip - dip_ref) from the sines of both dips (their cosines are >= 0: dips lie within +-90 deg), without any
-/// inverse trigonometric function; cos_dip_ref = sqrt(1 - sin_dip_ref^2), computed once with the reference.
-inline double cos_dip_deviation(double sin_dip, double sin_dip_ref, double cos_dip_ref) {
-  return std::sqrt(std::max(0.0, 1.0 - sin_dip * sin_dip)) * cos_dip_ref + sin_dip * sin_dip_ref;
-}
-
 /// Makes a covariance symmetric and clamps its diagonal away from zero and from overflow, so that rounding never
 /// lets it lose positive definiteness.
 template <class Mat>

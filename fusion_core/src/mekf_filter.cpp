@@ -196,9 +196,7 @@ MekfNoise MekfFilter::noise() const {
 void MekfFilter::set_reference(const Vec3& mag_earth) {
   // Only the horizontal magnitude and the vertical component matter: the reference points to magnetic north.
   state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
-  state_.h_ref_norm = state_.h_ref.norm();
-  state_.h_ref_sin_dip = kalman_support::sin_dip(state_.h_ref, Vec3::UnitZ(), state_.h_ref_norm);
-  state_.h_ref_cos_dip = std::sqrt(1.0 - state_.h_ref_sin_dip * state_.h_ref_sin_dip);
+  state_.h_ref_judged = MagneticRAdaption::Reference::of(state_.h_ref, Vec3::UnitZ());
 }
 
 UpdateResult MekfFilter::initialise(const ImuSample& s) {
@@ -319,11 +317,7 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
   const Mat3 to_sensor = state_.q.toRotationMatrix().transpose();
   const Vec3 r3 = to_sensor.col(2);  // earth vertical in the sensor frame
   if (params_.mag_rejection != 0.0) {
-    const double mag_norm = s.mag.norm();
-    const double scale =
-        r_adaption_.update_from_cosine(s.timestamp_ns, mag_norm / state_.h_ref_norm,
-                                       kalman_support::cos_dip_deviation(kalman_support::sin_dip(s.mag, r3, mag_norm),
-                                                                         state_.h_ref_sin_dip, state_.h_ref_cos_dip));
+    const double scale = r_adaption_.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged);
     if (!std::isfinite(scale)) {
       state_.flags.mag_rejected = true;
       return;

@@ -1,5 +1,6 @@
 #include "bsn/fusion/r_adaption.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -9,6 +10,12 @@ namespace {
 
 void require(bool ok, const char* what) {
   if (!ok) throw std::invalid_argument(std::string("MagneticRAdaption: ") + what);
+}
+
+// Sine of the dip of m below the horizontal plane whose unit upward normal is up, positive downwards, for
+// |m| = m_norm: -m.up / |m| clamped to [-1, 1]; 0 for a zero field.
+double sine_of_dip(const Vec3& m, const Vec3& up, double m_norm) {
+  return m_norm > 0.0 ? std::clamp(-m.dot(up) / m_norm, -1.0, 1.0) : 0.0;
 }
 
 }  // namespace
@@ -25,6 +32,22 @@ MagneticRAdaption::MagneticRAdaption(const Params& params) : params_(params) {
   constexpr double kPi = 3.14159265358979323846;
   cos_dip_enter_ = params.dip_enter_rad < kPi ? std::cos(params.dip_enter_rad) : -2.0;
   cos_dip_exit_ = params.dip_exit_rad < kPi ? std::cos(params.dip_exit_rad) : -2.0;
+}
+
+MagneticRAdaption::Reference MagneticRAdaption::Reference::of(const Vec3& m, const Vec3& up) {
+  Reference ref;
+  ref.norm = m.norm();
+  ref.sin_dip = sine_of_dip(m, up, ref.norm);
+  ref.cos_dip = std::sqrt(1.0 - ref.sin_dip * ref.sin_dip);
+  return ref;
+}
+
+double MagneticRAdaption::update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref) {
+  const double m_norm = m.norm();
+  const double s = sine_of_dip(m, up, m_norm);
+  // cos(dip - dip_ref) from both sines (both cosines are >= 0).
+  const double cos_dev = std::sqrt(std::max(0.0, 1.0 - s * s)) * ref.cos_dip + s * ref.sin_dip;
+  return update_from_cosine(t_ns, m_norm / ref.norm, cos_dev);
 }
 
 double MagneticRAdaption::update(std::uint64_t t_ns, double magnitude_ratio, double dip_deviation_rad) {

@@ -42,6 +42,40 @@ TEST(MagneticRAdaption, CosineOfTheDipDeviationJudgesExactlyAsTheAngle) {
   EXPECT_TRUE(std::isinf(r.update_from_cosine(0, 1.0, std::nan(""))));
 }
 
+// The filters pass the raw reading, the estimated vertical and a Reference; in any sensor orientation this must
+// judge every sample as the magnitude ratio and dip angle do.
+TEST(MagneticRAdaption, ReadingAgainstItsReferenceJudgesAsRatioAndAngle) {
+  constexpr double kDip = 64.0 * 3.14159265358979323846 / 180.0;
+  auto earth_field = [](double magnitude, double dip) {
+    return Vec3(0.0, magnitude * std::cos(dip), -magnitude * std::sin(dip));  // ENU
+  };
+  const MagneticRAdaption::Reference ref = MagneticRAdaption::Reference::of(earth_field(49.0, kDip), Vec3::UnitZ());
+  EXPECT_NEAR(ref.norm, 49.0, 1e-12);
+  EXPECT_NEAR(std::asin(ref.sin_dip), kDip, 1e-12);
+  const Quat q = from_yaw_pitch_roll({0.7, -0.4, 1.1});  // sensor-to-earth
+  const Vec3 up = q.conjugate() * Vec3::UnitZ();
+  MagneticRAdaption by_angle, by_reading;
+  int disturbed = 0;
+  for (std::uint64_t k = 0; k < 2000; ++k) {
+    const double t = 0.01 * static_cast<double>(k);
+    const double dip_dev = 0.3 * std::sin(0.7 * t) * std::sin(0.13 * t);
+    const double ratio = 1.0 + 0.15 * std::sin(1.3 * t) * std::sin(0.05 * t);
+    const Vec3 m = q.conjugate() * earth_field(49.0 * ratio, kDip + dip_dev);
+    const double a = by_angle.update(k * 10 * kMs, ratio, dip_dev);
+    const double r = by_reading.update(k * 10 * kMs, m, up, ref);
+    // Away from the thresholds (rounding of the reading's construction decides exactly at them).
+    const bool near_threshold =
+        std::abs(std::abs(dip_dev) - 0.1745) < 1e-9 || std::abs(std::abs(dip_dev) - 0.0873) < 1e-9 ||
+        std::abs(std::abs(ratio - 1.0) - 0.1) < 1e-9 || std::abs(std::abs(ratio - 1.0) - 0.05) < 1e-9;
+    if (!near_threshold) {
+      ASSERT_EQ(a, r) << "t = " << t;
+    }
+    disturbed += std::isinf(a) ? 1 : 0;
+  }
+  EXPECT_GT(disturbed, 100);  // both states were visited
+  EXPECT_LT(disturbed, 1900);
+}
+
 TEST(MagneticRAdaption, MagnitudeOrDipBeyondTheEnterThresholdGivesInfiniteVariance) {
   MagneticRAdaption r;
   EXPECT_TRUE(std::isinf(r.update(0, 1.11, 0.0)));

@@ -98,13 +98,11 @@ class DlkfFilter final : public OrientationFilter {
   };
 
   struct State {
-    dlkf::SplitKalman gravity;     ///< [g_S (m/s^2), external acceleration a_S (m/s^2)]
-    dlkf::SplitKalman magnetic;    ///< [h_S (uT), disturbance d_S (uT)]
-    bool have_mag = false;         ///< the magnetic filter holds a measured field (else a gyro-carried heading)
-    double mag_ref_norm = 0.0;     ///< |h| at the first magnetometer sample, uT (R-adaption reference)
-    double mag_ref_sin_dip = 0.0;  ///< sine of the dip at the first magnetometer sample (R-adaption reference)
-    double mag_ref_cos_dip = 1.0;  ///< its cosine
-    Quat q = Quat::Identity();     ///< TRIAD result, sensor-to-earth
+    dlkf::SplitKalman gravity;             ///< [g_S (m/s^2), external acceleration a_S (m/s^2)]
+    dlkf::SplitKalman magnetic;            ///< [h_S (uT), disturbance d_S (uT)]
+    bool have_mag = false;                 ///< the magnetic filter holds a measured field (else a gyro-carried heading)
+    MagneticRAdaption::Reference mag_ref;  ///< magnitude and dip at the first magnetometer sample (R-adaption)
+    Quat q = Quat::Identity();             ///< TRIAD result, sensor-to-earth
     Vec3 gyr_prev = Vec3::Zero();
     bool have_gyr_prev = false;
     bool initialised = false;

@@ -47,14 +47,12 @@ class EkfFilter final : public OrientationFilter {
   };
 
   struct State {
-    Quat q = Quat::Identity();     ///< sensor-to-earth
-    Vec3 bias = Vec3::Zero();      ///< gyro bias, sensor frame, rad/s
-    Mat7 p = Mat7::Identity();     ///< covariance of [q (w, x, y, z), b (rad/s)]
-    Vec3 h_ref = Vec3::Zero();     ///< predefined earth field (ENU), uT; zero = not known yet
-    double h_ref_sin_dip = 0.0;    ///< sine of the dip of h_ref (the R-adaption compares dips by their cosine)
-    double h_ref_cos_dip = 1.0;    ///< its cosine
-    double h_ref_norm = 0.0;       ///< |h_ref|, uT
-    Vec3 gyr_prev = Vec3::Zero();  ///< raw gyro reading of the previous sample, rad/s
+    Quat q = Quat::Identity();                  ///< sensor-to-earth
+    Vec3 bias = Vec3::Zero();                   ///< gyro bias, sensor frame, rad/s
+    Mat7 p = Mat7::Identity();                  ///< covariance of [q (w, x, y, z), b (rad/s)]
+    Vec3 h_ref = Vec3::Zero();                  ///< predefined earth field (ENU), uT; zero = not known yet
+    MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
+    Vec3 gyr_prev = Vec3::Zero();               ///< raw gyro reading of the previous sample, rad/s
     bool have_gyr_prev = false;
     bool initialised = false;
     std::uint64_t last_ns = 0;

@@ -133,10 +133,8 @@ class MekfFilter final : public OrientationFilter {
     mekf::Mat6 p = mekf::Mat6::Identity();  ///< error-state covariance of [dtheta (rad), db (rad/s)]
     Vec3 w_prev = Vec3::Zero();             ///< bias-corrected rate at the previous sample, rad/s
     bool have_w_prev = false;
-    Vec3 h_ref = Vec3::Zero();   ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
-    double h_ref_sin_dip = 0.0;  ///< sine of the dip of h_ref (the R-adaption compares dips by their cosine)
-    double h_ref_cos_dip = 1.0;  ///< its cosine
-    double h_ref_norm = 0.0;     ///< |h_ref|, uT
+    Vec3 h_ref = Vec3::Zero();                  ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
+    MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
     bool initialised = false;
     std::uint64_t last_ns = 0;
     std::uint64_t init_ns = 0;

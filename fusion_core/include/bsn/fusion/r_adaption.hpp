@@ -13,6 +13,7 @@
 #include <string_view>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion {
 
@@ -45,6 +46,19 @@ class MagneticRAdaption {
   /// The same judgement from the cosine of the dip deviation instead of the angle (|dev| > threshold exactly when
   /// cos(dev) < cos(threshold), for deviations within +-180 deg), so that the filters need no inverse sine.
   double update_from_cosine(std::uint64_t t_ns, double magnitude_ratio, double cos_dip_deviation);
+
+  /// A reference field as the judgement needs it: magnitude and dip, the dip as sine and cosine so that readings
+  /// are judged without inverse trigonometry.
+  struct Reference {
+    double norm = 0.0;     ///< |h_ref|, uT; 0 = not known yet
+    double sin_dip = 0.0;  ///< sine of the dip below the horizontal, positive downwards
+    double cos_dip = 1.0;  ///< its cosine (>= 0: dips lie within +-90 deg)
+    /// The reference of field m in a frame whose unit upward vertical is `up`.
+    static Reference of(const Vec3& m, const Vec3& up);
+  };
+  /// Judges reading m against `ref`, with `up` the estimated unit vertical in m's frame (Fan eq. 17): the
+  /// magnitude ratio |m| / ref.norm and the dip deviation, compared by its cosine.
+  double update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref);
 
   /// True while the field is judged disturbed (including the clean waiting period).
   bool disturbed() const { return disturbed_; }
