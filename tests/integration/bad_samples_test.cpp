@@ -57,7 +57,7 @@ const bsn::NodeStatus* latest_node_status(const std::vector<bsn::Status>& status
 class FusionInput : public ProcessTest {};
 
 TEST_F(FusionInput, BadSamples) {
-  constexpr int kDomain = 22;
+  const int kDomain = test_domain(2);
   constexpr std::uint64_t kPeriodNs = 10'000'000;  // 100 Hz
   constexpr std::uint64_t kSamples = 600;          // 6 s of the test sequence
   constexpr double kRadToDeg = 180.0 / std::numbers::pi;

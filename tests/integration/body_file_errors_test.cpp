@@ -34,7 +34,7 @@ class BodyFileErrors : public ProcessTest {
 };
 
 TEST_F(BodyFileErrors, UnknownKey) {
-  expect_error(23,
+  expect_error(test_domain(3),
                "name: t\n"
                "segments:\n"
                "  - name: a\n"
@@ -44,7 +44,7 @@ TEST_F(BodyFileErrors, UnknownKey) {
 }
 
 TEST_F(BodyFileErrors, DuplicateSegment) {
-  expect_error(24,
+  expect_error(test_domain(4),
                "name: t\n"
                "segments:\n"
                "  - name: a\n"
@@ -59,7 +59,7 @@ TEST_F(BodyFileErrors, DuplicateSegment) {
 
 TEST_F(BodyFileErrors, ParentCycle) {
   // r is a proper root; a -> b -> a is the cycle, reported at the entry of a (line 5).
-  expect_error(25,
+  expect_error(test_domain(5),
                "name: t\n"
                "segments:\n"
                "  - name: r\n"
@@ -75,7 +75,7 @@ TEST_F(BodyFileErrors, ParentCycle) {
 
 TEST_F(BodyFileErrors, YamlSyntaxError) {
   // The '[' on line 5 is never closed; the parser only notices on a later line. The report names line 5.
-  expect_error(26,
+  expect_error(test_domain(6),
                "name: t\n"
                "segments:\n"
                "  - name: a\n"

@@ -10,7 +10,7 @@ namespace {
 class CycloneInterop : public ProcessTest {};
 
 TEST_F(CycloneInterop, CyclonePublishesRawAndReceivesOrientations) {
-  constexpr int kDomain = 28;
+  const int kDomain = test_domain(8);
   write_file(dir() / "body.yaml", "segments:\n  - name: cy\n    node: cy\n");
   spawn("fusion", {"fusion", "--domain", std::to_string(kDomain), "--body", (dir() / "body.yaml").string()});
   const std::string log = (dir() / "peer.log").string();

@@ -29,7 +29,7 @@ bool foreign_domain_port_entry(const std::string& name, int domain) {
 }
 
 TEST_F(DemoCommand, Demo) {
-  constexpr int kDomain = 27;
+  const int kDomain = test_domain(7);
   const std::set<std::string> shm_before = directory_entries("/dev/shm");
 
   auto& demo = spawn("demo", {"demo", "--duration", "20", "--domain", std::to_string(kDomain)});

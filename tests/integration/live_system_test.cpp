@@ -166,7 +166,7 @@ class LiveSystem : public ProcessTest {
 // Orientation rate >= 95 % of 100 Hz per segment; estimate within 2 deg of the simulator's truth for 10 s after a
 // 5 s settling time; joint angles for both joints.
 TEST_F(LiveSystem, LiveAccuracy) {
-  constexpr int kDomain = 20;
+  const int kDomain = test_domain(0);
   constexpr auto kRateWindow = 10s;
   constexpr auto kSettle = std::chrono::nanoseconds(5s);
   constexpr auto kAccuracyWindow = std::chrono::nanoseconds(10s);
@@ -264,7 +264,7 @@ TEST_F(LiveSystem, LiveAccuracy) {
 // A node whose process dies: the other segments keep their rate, and bsn/status reports the node stale within
 // 1 s (stale timeout 0.3 s, status published at once on the change).
 TEST_F(LiveSystem, StaleNode) {
-  constexpr int kDomain = 21;
+  const int kDomain = test_domain(1);
   constexpr auto kAfterKill = 3s;
   constexpr auto kMaxStaleDelay = 1s;
 

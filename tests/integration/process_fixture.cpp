@@ -16,6 +16,22 @@ namespace bsn::integration {
 
 std::string bsn_executable() { return BSN_EXECUTABLE; }
 
+int test_domain(int offset) {
+  constexpr int kDefaultBase = 20;
+  constexpr int kOffsets = 30;  // each run owns base .. base + 29
+  int base = kDefaultBase;
+  if (const char* env = std::getenv("BSN_TEST_DOMAIN_BASE")) {
+    char* end = nullptr;
+    const long v = std::strtol(env, &end, 10);
+    if (end == env || *end != '\0' || v < 0 || v > 232 - kOffsets + 1)
+      throw std::invalid_argument(std::string("BSN_TEST_DOMAIN_BASE='") + env + "' is not a domain id in 0.." +
+                                  std::to_string(232 - kOffsets + 1));
+    base = static_cast<int>(v);
+  }
+  if (offset < 0 || offset >= kOffsets) throw std::invalid_argument("test domain offset out of 0..29");
+  return base + offset;
+}
+
 bool wait_until(const std::function<bool()>& done, std::chrono::milliseconds timeout) {
   const auto end = Clock::now() + timeout;
   while (!done()) {

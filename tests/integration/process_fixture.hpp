@@ -25,6 +25,10 @@ using Clock = std::chrono::steady_clock;
 /// Path of the `bsn` program under test (set by CMake).
 std::string bsn_executable();
 
+/// The DDS domain id of test number `offset` (0..29): $BSN_TEST_DOMAIN_BASE (default 20) + offset. Two test runs
+/// on one machine use different bases so that they never see each other. Throws if the id leaves 0..232.
+int test_domain(int offset);
+
 /// Polls `done` every 20 ms until it returns true (-> true) or `timeout` passes (-> false).
 bool wait_until(const std::function<bool()>& done, std::chrono::milliseconds timeout);
 

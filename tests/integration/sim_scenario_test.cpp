@@ -38,7 +38,7 @@ TEST_F(SimScenario, OfflineFilesAreBroadLayoutAndScoreWell) {
 }
 
 TEST_F(SimScenario, LivePublishesTheScenarioSegmentAndItsTruth) {
-  constexpr int kDomain = 29;
+  const int kDomain = test_domain(9);
   std::mutex mutex;
   std::size_t raw = 0, truth = 0;
   dds::Participant participant({kDomain, "sim scenario test"});
