@@ -2,7 +2,7 @@
 //
 // The bench starts one real `bsn fusion` process per run with a generated body model of N segments (nodes
 // n0..n{N-1} on segments s0..s{N-1}, a chain by default) and plays all N sensor nodes itself: every 10 ms tick
-// it writes one bsn/raw sample per node (synthesised by MimuSynthesizer from a SinusoidalRotation), stamped with
+// it writes one bsn/raw sample per node (the swinging body of `bsn sim --node`, one per node), stamped with
 // CLOCK_MONOTONIC at the moment of writing. The fusion service copies that timestamp into bsn/orientation, and the
 // bench's own bsn/orientation reader takes CLOCK_MONOTONIC again at reception: on one host both processes share the
 // clock, so the difference is the end-to-end latency raw sample written -> orientation received.
@@ -54,8 +54,7 @@
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/dds/topics.hpp"
 #include "bsn/fusion/body_model.hpp"
-#include "bsn/sim/mimu_synthesizer.hpp"
-#include "bsn/sim/motion_model.hpp"
+#include "bsn/sim/scenario.hpp"
 
 #ifndef BSN_EXECUTABLE
 #error "BSN_EXECUTABLE must name the bsn program (set by tests/bench/CMakeLists.txt)"
@@ -400,23 +399,21 @@ StatusTotals totals(const bsn::Status& s) {
 
 class NodeSet {
  public:
-  NodeSet(std::size_t n, double rate_hz) : period_s_(1.0 / rate_hz) {
+  NodeSet(std::size_t n, double rate_hz) {
     raw_.resize(n);
-    motion_.reserve(n);
-    synth_.reserve(n);
+    nodes_.reserve(n);
     for (std::size_t i = 0; i < n; ++i) {
       raw_[i].node_id("n" + std::to_string(i));
-      motion_.push_back(bsn::sim::SinusoidalRotation::from_seed(1000 + i));
-      synth_.emplace_back(bsn::sim::EarthField{}, bsn::sim::WhiteNoise{}, 0x5eed0000ull + i);
+      nodes_.emplace_back(bsn::sim::swing_scenario("s" + std::to_string(i), 1000 + i, rate_hz, 0.0),
+                          std::vector<std::string>{}, false);
     }
   }
 
-  /// Fills every node's sample of tick k (everything but the timestamp), so a tick is only writes.
+  /// Fills every node's sample of the next tick (everything but the timestamp), so a tick is only writes.
   void prepare(std::uint64_t k) {
-    const double t = static_cast<double>(k) * period_s_;
     for (std::size_t i = 0; i < raw_.size(); ++i) {
-      const bsn::sim::MotionState m = motion_[i].at(t);
-      dds::fill_raw_sample(synth_[i].measure(m, 0), raw_[i]);
+      nodes_[i].next(out_);
+      dds::fill_raw_sample(out_[0].sample, raw_[i]);
       raw_[i].seq(k);
     }
   }
@@ -431,10 +428,9 @@ class NodeSet {
   std::uint64_t write_failures() const { return write_failures_; }
 
  private:
-  double period_s_;
   std::vector<bsn::RawSample> raw_;
-  std::vector<bsn::sim::SinusoidalRotation> motion_;
-  std::vector<bsn::sim::MimuSynthesizer> synth_;
+  std::vector<bsn::sim::ScenarioRunner> nodes_;  ///< one swinging body per node, until stopped
+  std::vector<bsn::sim::ScenarioSample> out_;
   std::uint64_t write_failures_ = 0;
 };
 

@@ -5,8 +5,7 @@
 
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/io/recording.hpp"
-#include "bsn/sim/mimu_synthesizer.hpp"
-#include "bsn/sim/motion_model.hpp"
+#include "bsn/sim/scenario.hpp"
 #include "process_fixture.hpp"
 
 namespace bsn::integration {
@@ -14,25 +13,24 @@ namespace {
 
 class EvalCommand : public ProcessTest {
  protected:
-  // Exact readings of a known rotation with its truth as reference, written as BROAD HDF5.
+  // Readings of a known rotation with its truth as reference, written as BROAD HDF5.
   std::string write_trial(const std::string& name, std::uint64_t seed) {
-    const auto motion = sim::SinusoidalRotation::from_seed(seed);
-    sim::MimuSynthesizer synth(sim::EarthField{}, sim::WhiteNoise{}, seed);
+    sim::ScenarioRunner runner(sim::swing_scenario("imu", seed, 100.0, 15.0), {}, false);
     io::Recording rec;
     rec.sampling_rate_hz = 100.0;
-    const Eigen::Index n = 1500;
+    const auto n = static_cast<Eigen::Index>(runner.sample_count());
     rec.gyr.resize(n, 3);
     rec.acc.resize(n, 3);
     rec.mag.resize(n, 3);
     rec.opt_quat.resize(n, 4);
     rec.movement.assign(static_cast<std::size_t>(n), 1);
-    for (Eigen::Index i = 0; i < n; ++i) {
-      const auto m = motion.at(static_cast<double>(i) / 100.0);
-      const auto s = synth.measure(m, 0);
+    std::vector<sim::ScenarioSample> out;
+    for (Eigen::Index i = 0; runner.next(out); ++i) {
+      const fusion::ImuSample& s = out[0].sample;
       rec.gyr.row(i) = s.gyr.transpose();
       rec.acc.row(i) = s.acc.transpose();
       rec.mag.row(i) = s.mag.transpose();
-      const auto& q = m.q_sensor_to_earth;
+      const auto& q = out[0].truth;
       rec.opt_quat.row(i) << q.w(), q.x(), q.y(), q.z();
     }
     const std::string path = (dir() / "trials" / (name + ".hdf5")).string();

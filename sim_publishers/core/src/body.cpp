@@ -161,6 +161,11 @@ Body free_body(const FreeMotion& motion, const std::string& name) {
   SegmentDef root;
   root.name = name;
   add_pose(root, motion.pose);
+  if (motion.swing) {
+    root.rotation[0].angle.harmonics = {motion.swing->yaw};
+    root.rotation[1].angle.harmonics = {motion.swing->pitch};
+    root.rotation[2].angle.harmonics = {motion.swing->roll};
+  }
   if (motion.random) {
     const RandomMotion& r = *motion.random;
     std::mt19937_64 rng(r.seed);
@@ -197,6 +202,25 @@ Body free_body(const FreeMotion& motion, const std::string& name) {
     }
   }
   return Body({std::move(root)});
+}
+
+FreeMotion random_swing(std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  // Per angle: offset, amplitude, frequency, phase, drawn in that order (yaw, pitch, roll).
+  auto angle = [&](double max_deg, double& offset) {
+    offset = (u(rng) - 0.5) * max_deg * kDeg;
+    const double amplitude = (0.3 + 0.7 * u(rng)) * max_deg * kDeg;
+    const double frequency = 0.1 + 0.3 * u(rng);
+    return Signal::Harmonic{amplitude, frequency, 2.0 * kPi * u(rng)};
+  };
+  FreeMotion m;
+  fusion::YawPitchRoll& o = m.pose.orientation;
+  m.swing = PoseSwing{};
+  m.swing->yaw = angle(60.0, o.yaw);
+  m.swing->pitch = angle(30.0, o.pitch);
+  m.swing->roll = angle(30.0, o.roll);
+  return m;
 }
 
 Body lower_body(const std::optional<Gait>& gait, const Pose& pose) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 
 namespace bsn::sim {
@@ -18,12 +19,25 @@ Body build_body(const ScenarioSpec& spec) {
   return free_body(spec.free_motion, spec.free_body_name);
 }
 
+ScenarioSpec swing_scenario(const std::string& segment, std::uint64_t seed, double rate_hz, double duration_s) {
+  ScenarioSpec spec;
+  spec.name = "swing";
+  spec.duration_s = duration_s > 0.0 ? duration_s : std::numeric_limits<double>::infinity();
+  spec.rate_hz = rate_hz;
+  spec.seed = seed;
+  spec.free_body_name = segment;
+  spec.free_motion = random_swing(seed);
+  // Densities: per-sample SD / sqrt(100 Hz).
+  spec.sensors.gyr.white_density = 0.0005;
+  spec.sensors.acc.white_density = 0.002;
+  spec.sensors.mag.white_density = 0.03;
+  return spec;
+}
+
 ScenarioRunner::ScenarioRunner(const ScenarioSpec& spec, const std::vector<std::string>& segments, bool ideal)
     : spec_(spec), body_(build_body(spec)) {
   if (!(spec.rate_hz > 0.0 && spec.rate_hz <= 10000.0)) throw std::invalid_argument("rate_hz must be in (0, 10000]");
-  if (!(spec.duration_s > 0.0) || !std::isfinite(spec.duration_s)) {
-    throw std::invalid_argument("duration_s must be > 0");
-  }
+  if (!(spec.duration_s > 0.0)) throw std::invalid_argument("duration_s must be > 0");
   if (ideal) spec_.sensors = SensorErrors::ideal();
   for (const AttachedMagnet& m : spec_.magnetic.attached_magnets) {
     if (m.segment >= body_.size()) throw std::invalid_argument("an attached magnet refers to a missing segment");
@@ -48,7 +62,9 @@ ScenarioRunner::ScenarioRunner(const ScenarioSpec& spec, const std::vector<std::
     sensors_.emplace_back(spec_.sensors, spec_.rate_hz, mix_seed(spec_.seed, 2 * i));
     timing_rng_.emplace_back(mix_seed(spec_.seed, 2 * i + 1));
   }
-  count_ = static_cast<std::uint64_t>(std::floor(spec_.duration_s * spec_.rate_hz + 1e-9));
+  count_ = std::isinf(spec_.duration_s)
+               ? std::numeric_limits<std::uint64_t>::max()
+               : static_cast<std::uint64_t>(std::floor(spec_.duration_s * spec_.rate_hz + 1e-9));
   states_.reserve(body_.size());
 }
 

@@ -126,14 +126,25 @@ struct ScriptedMove {
 std::vector<ScriptedRotation> random_pose_sequence(int count, double hold_s, double turn_s, double start_s,
                                                    std::uint64_t seed);
 
-/// Free-body motion: base pose + random motion + scripted rotations and moves, composed in that order.
+/// One sinusoid on each angle of the pose (yaw, pitch, roll, z-y'-x''), amplitudes in rad.
+struct PoseSwing {
+  Signal::Harmonic yaw, pitch, roll;
+};
+
+/// Free-body motion: base pose (+ its swing) + random motion + scripted rotations and moves, in that order.
 struct FreeMotion {
   Pose pose;
+  std::optional<PoseSwing> swing;
   std::optional<RandomMotion> random;
   std::vector<ScriptedRotation> rotations;
   std::vector<ScriptedMove> moves;
 };
 Body free_body(const FreeMotion& motion, const std::string& name = "body");
+
+/// A varied but bounded rotation about the sensor picked from a seed (no translation): yaw swings up to
+/// +-60 deg, pitch and roll up to +-30 deg, each around a random offset, at 0.1-0.4 Hz. Pitch stays below
+/// 45 deg, far from gimbal lock. The motion of `bsn sim --node` without a scenario.
+FreeMotion random_swing(std::uint64_t seed);
 
 /// Gait of the lower body: joint angles as harmonics of the stride phase (left and right half a stride
 /// apart), pelvis translation forward at `speed_m_s` with vertical and lateral oscillation.

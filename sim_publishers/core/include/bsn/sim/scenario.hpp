@@ -21,7 +21,7 @@ enum class BodyKind { kFree, kLowerBody, kUpperBody };
 struct ScenarioSpec {
   std::string name;
   std::string description;
-  double duration_s = 60.0;
+  double duration_s = 60.0;  ///< infinity: until the caller stops
   double rate_hz = 100.0;
   std::uint64_t seed = 1;
   BodyKind body = BodyKind::kFree;
@@ -36,6 +36,11 @@ struct ScenarioSpec {
 };
 
 Body build_body(const ScenarioSpec& spec);
+
+/// What `bsn sim --node` runs without a scenario file: one free body `segment` on random_swing(seed) in the
+/// default earth field, with white noise only (at 100 Hz 0.005 rad/s, 0.02 m/s^2 and 0.3 uT per sample).
+/// duration_s 0 = until stopped.
+ScenarioSpec swing_scenario(const std::string& segment, std::uint64_t seed, double rate_hz, double duration_s);
 
 /// One segment's output at one sample.
 struct ScenarioSample {
