@@ -13,7 +13,7 @@ std::optional<std::size_t> BodyModel::find_segment(const std::string& n) const {
   return std::nullopt;
 }
 
-std::optional<std::size_t> BodyModel::find_node(const std::string& node) const {
+std::optional<std::size_t> BodyModel::find_node(std::string_view node) const {
   for (std::size_t i = 0; i < segments.size(); ++i)
     if (segments[i].node == node) return i;
   return std::nullopt;

@@ -2,19 +2,14 @@
 
 #include <unistd.h>
 
-#include <algorithm>
+#include <chrono>
 
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/log.hpp"
 
 namespace bsn::services {
 
-using Clock = std::chrono::steady_clock;
-
 namespace {
-
-constexpr std::size_t kMaxUnknownNodesListed = 16;
-constexpr auto kDiscoveryGrace = std::chrono::seconds(2);
 
 std::string default_process_id() {
   char host[256] = {};
@@ -27,143 +22,86 @@ std::uint32_t to_wire_flags(const fusion::FilterFlags& f) {
          (f.initialising ? bsn::FLAG_INITIALISING : 0u) | (f.reinitialised ? bsn::FLAG_REINITIALISED : 0u);
 }
 
+double seconds(std::uint64_t ns) { return std::chrono::duration<double>(std::chrono::nanoseconds(ns)).count(); }
+
 }  // namespace
 
 FusionService::FusionService(dds::Participant& participant, fusion::BodyModel body, Options options)
-    : participant_(participant), body_(std::move(body)), options_(std::move(options)) {
+    : participant_(participant),
+      options_(std::move(options)),
+      fusion_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
+      accepted_at_last_status_(fusion_.body().segments.size(), 0) {
   if (options_.process_id.empty()) options_.process_id = default_process_id();
-  segments_.reserve(body_.segments.size());
-  for (std::size_t i = 0; i < body_.segments.size(); ++i) {
-    const auto& spec = body_.segments[i];
-    SegmentRuntime& seg = segments_.emplace_back();
-    seg.spec = spec;
-    seg.filter = fusion::make_filter(spec.filter);
-    seg.gate = fusion::SampleGate(options_.gate);
-    if (const auto c = options_.calibrations.find(spec.node); c != options_.calibrations.end())
-      seg.calibration = c->second;
-    by_node_[spec.node] = i;
-  }
-  for (std::size_t i = 0; i < segments_.size(); ++i) {
-    if (auto p = body_.find_segment(segments_[i].spec.parent)) {
-      segments_[i].parent = *p;
-      segments_[*p].children.push_back(i);
-    }
-  }
   const dds::TopicQos estimate = options_.best_effort ? dds::TopicQos::kEstimateBestEffort : dds::TopicQos::kEstimate;
   orientation_writer_ = participant_.make_writer<bsn::Orientation>(dds::kOrientationTopic, estimate);
   joint_writer_ = participant_.make_writer<bsn::JointAngles>(dds::kJointAnglesTopic, estimate);
   status_writer_ = participant_.make_writer<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched);
-  last_status_ = started_ = Clock::now();
+  last_status_ns_ = dds::monotonic_ns();
   // The reader goes last: its callback may fire as soon as it exists.
   raw_reader_ = participant_.make_reader<bsn::RawSample>(
       dds::kRawTopic, dds::TopicQos::kSensorData,
       [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
 }
 
-namespace {
-
-// u = H (raw - B) on every calibrated channel that the sample carries.
-void apply_calibration(const calib::SensorCalibration& c, fusion::ImuSample& s) {
-  if (c.accelerometer && s.has_acc) s.acc = calib::apply(*c.accelerometer, s.acc);
-  if (c.gyroscope && s.has_gyr) s.gyr = calib::apply(*c.gyroscope, s.gyr);
-  if (c.magnetometer && s.has_mag) s.mag = calib::apply(*c.magnetometer, s.mag);
-}
-
-}  // namespace
-
 void FusionService::on_raw(const bsn::RawSample& raw) {
   std::lock_guard lock(mutex_);
-  const auto it = by_node_.find(raw.node_id());
-  if (it == by_node_.end()) {
-    ++unknown_node_samples_;
-    if (unknown_nodes_.size() < kMaxUnknownNodesListed &&
-        std::find(unknown_nodes_.begin(), unknown_nodes_.end(), raw.node_id()) == unknown_nodes_.end()) {
-      unknown_nodes_.push_back(raw.node_id());
+  const std::uint64_t now = dds::monotonic_ns();
+  const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now);
+  if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
+    if (r.new_unknown_node)
       dds::log_warn("samples from node '", raw.node_id(), "', which is on no segment of the body model; ignored");
-    }
     return;
   }
-  SegmentRuntime& seg = segments_[it->second];
-  const auto now = Clock::now();
-  seg.last_arrival = now;
-  seg.ever_received = true;
-  if (seg.stale) {
-    seg.stale = false;
-    dds::log_info("node '", seg.spec.node, "' (", seg.spec.name, ") is sending again");
+  const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
+  if (r.node_fresh) {
+    dds::log_info("node '", spec.node, "' (", spec.name, ") is sending again");
     publish_status(now);
   }
-
-  fusion::ImuSample sample = dds::to_imu_sample(raw);
-  apply_calibration(seg.calibration, sample);
-  const fusion::SampleVerdict verdict = seg.gate.check(raw.seq(), sample);
-  if (verdict == fusion::SampleVerdict::kAcceptedClockReset) {
-    dds::log_warn("node '", seg.spec.node, "': its clock moved to a new time base; restarting its filter");
-    seg.filter->reset();
-  } else if (verdict != fusion::SampleVerdict::kAccepted) {
-    return;  // counted by the gate, reported on bsn/status
-  }
-  if (seg.filter->update(sample) == fusion::UpdateResult::kRejected) {
-    ++seg.filter_rejected;
-    return;
-  }
-  seg.q = seg.filter->orientation();
-  seg.flags = to_wire_flags(seg.filter->flags());
-  seg.has_orientation = true;
-  publish_orientation(seg, sample.timestamp_ns);
-  if (seg.parent) {
-    const SegmentRuntime& parent = segments_[*seg.parent];
-    if (parent.has_orientation) publish_joint(parent, seg, sample.timestamp_ns);
-  }
+  if (r.clock_reset) dds::log_warn("node '", spec.node, "': its clock moved to a new time base; restarting its filter");
+  if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
+  publish_orientation(r, raw.timestamp_ns());
+  if (r.joint) publish_joint(*r.joint, raw.timestamp_ns());
 }
 
-void FusionService::publish_orientation(SegmentRuntime& seg, std::uint64_t timestamp_ns) {
+void FusionService::publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns) {
+  const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
   bsn::Orientation& o = orientation_msg_;
-  o.segment(seg.spec.name);
-  o.node_id(seg.spec.node);
+  o.segment(spec.name);
+  o.node_id(spec.node);
   o.timestamp_ns(timestamp_ns);
-  dds::fill_orientation(seg.q, o);
-  const fusion::Vec3 b = seg.filter->gyro_bias();
-  o.gyro_bias({b.x(), b.y(), b.z()});
-  o.flags(seg.flags);
+  dds::fill_orientation(r.orientation, o);
+  o.gyro_bias({r.gyro_bias.x(), r.gyro_bias.y(), r.gyro_bias.z()});
+  o.flags(to_wire_flags(r.flags));
   if (!orientation_writer_->write(o)) ++write_failures_;
 }
 
-void FusionService::publish_joint(const SegmentRuntime& parent, const SegmentRuntime& child,
-                                  std::uint64_t timestamp_ns) {
+void FusionService::publish_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns) {
+  const fusion::SegmentSpec& child = fusion_.body().segments[joint.child];
   bsn::JointAngles& j = joint_msg_;
-  const fusion::Quat rel = fusion::canonical(fusion::relative_orientation(parent.q, child.q));
-  const fusion::Vec3 a = fusion::decompose(rel, child.spec.joint_axes);
-  j.joint(fusion::joint_name(child.spec));
-  j.parent(parent.spec.name);
-  j.child(child.spec.name);
+  j.joint(fusion::joint_name(child));
+  j.parent(fusion_.body().segments[joint.parent].name);
+  j.child(child.name);
   j.timestamp_ns(timestamp_ns);
-  j.quat(dds::to_wxyz(rel));
-  j.axes(child.spec.joint_axes.name());
-  j.angles({a.x(), a.y(), a.z()});
-  j.flags((parent.stale || child.stale ? bsn::FLAG_STALE : 0u) |
-          ((parent.flags | child.flags) & bsn::FLAG_INITIALISING));
+  j.quat(dds::to_wxyz(joint.relative));
+  j.axes(child.joint_axes.name());
+  j.angles({joint.angles.x(), joint.angles.y(), joint.angles.z()});
+  j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u));
   if (!joint_writer_->write(j)) ++write_failures_;
 }
 
 void FusionService::tick() {
   std::lock_guard lock(mutex_);
-  const auto now = Clock::now();
-  const auto stale_after = std::chrono::duration<double>(options_.stale_timeout_s);
-  bool changed = false;
-  for (auto& seg : segments_) {
-    // A node that never sent gets a grace period for discovery before it counts as stale.
-    const bool silent = seg.ever_received ? now - seg.last_arrival > stale_after : now - started_ > kDiscoveryGrace;
-    if (silent && !seg.stale) {
-      seg.stale = true;
-      changed = true;
-      if (seg.ever_received) dds::log_warn("node '", seg.spec.node, "' (", seg.spec.name, ") is stale");
-    }
+  const std::uint64_t now = dds::monotonic_ns();
+  const auto turned_stale = fusion_.check_stale(now);
+  for (const std::size_t i : turned_stale) {
+    const fusion::SegmentSpec& spec = fusion_.body().segments[i];
+    if (fusion_.segment(i).last_arrival_ns) dds::log_warn("node '", spec.node, "' (", spec.name, ") is stale");
   }
-  if (changed || now - last_status_ >= std::chrono::duration<double>(options_.status_period_s)) publish_status(now);
+  if (!turned_stale.empty() || seconds(now - last_status_ns_) >= options_.status_period_s) publish_status(now);
 }
 
-void FusionService::publish_status(Clock::time_point now) {
-  const double period = std::chrono::duration<double>(now - last_status_).count();
+void FusionService::publish_status(std::uint64_t now) {
+  const double period = seconds(now - last_status_ns_);
   bsn::Status st;
   st.process_id(options_.process_id);
   st.wall_time_ns(static_cast<std::uint64_t>(
@@ -171,40 +109,35 @@ void FusionService::publish_status(Clock::time_point now) {
           .count()));
   st.period_s(period);
   std::vector<bsn::NodeStatus> nodes;
-  for (auto& seg : segments_) {
-    const auto& c = seg.gate.counters();
+  for (std::size_t i = 0; i < fusion_.body().segments.size(); ++i) {
+    const fusion::SegmentSpec& spec = fusion_.body().segments[i];
+    const fusion::BodyFusion::Segment& state = fusion_.segment(i);
+    const auto& c = state.gate.counters();
     bsn::NodeStatus n;
-    n.node_id(seg.spec.node);
-    n.segment(seg.spec.name);
-    n.rate_hz(period > 0.0 ? static_cast<double>(c.accepted - seg.accepted_at_last_status) / period : 0.0);
-    seg.accepted_at_last_status = c.accepted;
+    n.node_id(spec.node);
+    n.segment(spec.name);
+    n.rate_hz(period > 0.0 ? static_cast<double>(c.accepted - accepted_at_last_status_[i]) / period : 0.0);
+    accepted_at_last_status_[i] = c.accepted;
     n.received(c.received);
     n.accepted(c.accepted);
     n.missing(c.missing);
-    std::vector<bsn::ReasonCount> rejected;
-    for (std::size_t r = 0; r < fusion::kRejectionReasonCount; ++r) {
-      bsn::ReasonCount rc;
-      rc.reason(std::string(fusion::rejection_reason_name(r)));
-      rc.count(c.rejected[r]);
-      rejected.push_back(rc);
+    for (std::size_t r = 0; r <= fusion::kRejectionReasonCount; ++r) {  // the gate's reasons, then the filter's
+      bsn::ReasonCount& rc = n.rejected().emplace_back();
+      rc.reason(r < fusion::kRejectionReasonCount ? std::string(fusion::rejection_reason_name(r)) : "filter_rejected");
+      rc.count(r < fusion::kRejectionReasonCount ? c.rejected[r] : state.filter_rejected);
     }
-    bsn::ReasonCount fr;
-    fr.reason("filter_rejected");
-    fr.count(seg.filter_rejected);
-    rejected.push_back(fr);
-    n.rejected(rejected);
     n.clock_resets(c.clock_resets);
-    n.stale(seg.stale);
-    n.last_sample_age_s(seg.ever_received ? std::chrono::duration<double>(now - seg.last_arrival).count() : -1.0);
+    n.stale(state.stale);
+    n.last_sample_age_s(state.last_arrival_ns ? seconds(now - *state.last_arrival_ns) : -1.0);
     nodes.push_back(std::move(n));
   }
   st.nodes(std::move(nodes));
-  st.unknown_node_samples(unknown_node_samples_);
-  st.unknown_nodes(unknown_nodes_);
+  st.unknown_node_samples(fusion_.unknown_node_samples());
+  st.unknown_nodes(fusion_.unknown_nodes());
   st.qos_mismatches(participant_.qos_mismatches());
   st.write_failures(write_failures_);
   status_writer_->write(st);
-  last_status_ = now;
+  last_status_ns_ = now;
 }
 
 }  // namespace bsn::services

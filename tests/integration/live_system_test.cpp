@@ -1,6 +1,6 @@
 // Three simulated sensor nodes and the fusion service as separate processes; the test subscribes like any DDS
-// client (bsn echo does the same) and checks rates, accuracy against the simulator's truth, joint angles and
-// the stale-node report.
+// client (bsn echo does the same) and checks rates, accuracy against the simulator's truth, joint angles against
+// the truth's relative orientation, and the stale-node report.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -59,9 +59,16 @@ struct Estimate {
   std::array<double, 4> quat;
 };
 
+struct JointSample {
+  std::uint64_t timestamp_ns;  // the child's sample
+  std::array<double, 4> quat;
+  std::array<double, 3> angles;
+};
+
 struct JointSeen {
   std::string parent, child, axes;
   std::vector<Clock::time_point> arrivals;
+  std::vector<JointSample> samples;
   bool all_finite = true;
 };
 
@@ -100,18 +107,18 @@ class Subscriber {
                                                           std::lock_guard lock(obs.mutex);
                                                           obs.truth[o.segment()][o.timestamp_ns()] = o.quat();
                                                         });
-    joints_ = participant_.make_reader<bsn::JointAngles>(dds::kJointAnglesTopic, dds::TopicQos::kEstimate,
-                                                         [&obs](const bsn::JointAngles& j, const SampleInfo&) {
-                                                           const auto now = Clock::now();
-                                                           std::lock_guard lock(obs.mutex);
-                                                           JointSeen& seen = obs.joints[j.joint()];
-                                                           seen.parent = j.parent();
-                                                           seen.child = j.child();
-                                                           seen.axes = j.axes();
-                                                           seen.arrivals.push_back(now);
-                                                           for (double a : j.angles())
-                                                             seen.all_finite = seen.all_finite && std::isfinite(a);
-                                                         });
+    joints_ = participant_.make_reader<bsn::JointAngles>(
+        dds::kJointAnglesTopic, dds::TopicQos::kEstimate, [&obs](const bsn::JointAngles& j, const SampleInfo&) {
+          const auto now = Clock::now();
+          std::lock_guard lock(obs.mutex);
+          JointSeen& seen = obs.joints[j.joint()];
+          seen.parent = j.parent();
+          seen.child = j.child();
+          seen.axes = j.axes();
+          seen.arrivals.push_back(now);
+          seen.samples.push_back({j.timestamp_ns(), j.quat(), j.angles()});
+          for (double a : j.angles()) seen.all_finite = seen.all_finite && std::isfinite(a);
+        });
     status_ = participant_.make_reader<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched,
                                                     [&obs](const bsn::Status& s, const SampleInfo&) {
                                                       const auto now = Clock::now();
@@ -139,6 +146,60 @@ std::size_t count_between(const std::vector<Clock::time_point>& v, Clock::time_p
   return n;
 }
 
+struct JointAccuracy {
+  std::size_t in_window = 0, matched = 0;
+  double max_error_deg = 0.0;         // published quaternion against the truth's relative orientation
+  double max_angles_error_deg = 0.0;  // published angles, composed again, against the same
+};
+
+/// The fusion service publishes a joint with each child estimate, from that estimate and the parent's latest one.
+/// Every joint sample with sensor time in [from, to) is matched to the two estimates it came from (the parent's is
+/// the one whose relative orientation to the child's gives the published quaternion) and compared with
+/// q_truth_parent* (x) q_truth_child at those two estimates' sample times.
+JointAccuracy joint_accuracy(const JointSeen& joint, const std::vector<Estimate>& parent,
+                             const std::vector<Estimate>& child,
+                             const std::unordered_map<std::uint64_t, std::array<double, 4>>& truth_parent,
+                             const std::unordered_map<std::uint64_t, std::array<double, 4>>& truth_child,
+                             std::uint64_t from, std::uint64_t to, const fusion::AxisSequence& axes) {
+  constexpr double kSameRad = 1e-6;                 // computed in double from the same published values
+  constexpr std::uint64_t kSearchNs = 100'000'000;  // the parent's latest estimate is a sample period or so away
+  std::unordered_map<std::uint64_t, fusion::Quat> child_at;
+  for (const auto& e : child) child_at.emplace(e.timestamp_ns, dds::to_quat(e.quat));
+  JointAccuracy acc;
+  for (const JointSample& j : joint.samples) {
+    if (j.timestamp_ns < from || j.timestamp_ns >= to) continue;
+    ++acc.in_window;
+    const auto c = child_at.find(j.timestamp_ns);
+    const auto truth_c = truth_child.find(j.timestamp_ns);
+    if (c == child_at.end() || truth_c == truth_child.end()) continue;
+    const fusion::Quat q = dds::to_quat(j.quat);
+    const Estimate* used = nullptr;
+    double best = kSameRad;
+    auto it = std::lower_bound(parent.begin(), parent.end(), j.timestamp_ns - kSearchNs,
+                               [](const Estimate& e, std::uint64_t t) { return e.timestamp_ns < t; });
+    for (; it != parent.end() && it->timestamp_ns <= j.timestamp_ns + kSearchNs; ++it) {
+      const double d = fusion::angle_between(fusion::relative_orientation(dds::to_quat(it->quat), c->second), q);
+      if (d < best) {
+        best = d;
+        used = &*it;
+      }
+    }
+    if (used == nullptr) continue;
+    const auto truth_p = truth_parent.find(used->timestamp_ns);
+    if (truth_p == truth_parent.end()) continue;
+    ++acc.matched;
+    const fusion::Quat truth =
+        fusion::relative_orientation(dds::to_quat(truth_p->second), dds::to_quat(truth_c->second));
+    const double err = fusion::angle_between(q, truth) * kRadToDeg;
+    const double angles_err =
+        fusion::angle_between(fusion::compose(fusion::Vec3(j.angles[0], j.angles[1], j.angles[2]), axes), truth) *
+        kRadToDeg;
+    if (!(err <= acc.max_error_deg)) acc.max_error_deg = err;  // also catches NaN
+    if (!(angles_err <= acc.max_angles_error_deg)) acc.max_angles_error_deg = angles_err;
+  }
+  return acc;
+}
+
 class LiveSystem : public ProcessTest {
  protected:
   /// Writes the body file and starts `bsn fusion` and one `bsn sim` per segment of the chain.
@@ -164,13 +225,16 @@ class LiveSystem : public ProcessTest {
 };
 
 // Orientation rate >= 95 % of 100 Hz per segment; estimate within 2 deg of the simulator's truth for 10 s after a
-// 5 s settling time; joint angles for both joints.
+// 5 s settling time; both joints at the child's rate and within 4 deg of the truth's relative orientation.
 TEST_F(LiveSystem, LiveAccuracy) {
   const int kDomain = test_domain(0);
   constexpr auto kRateWindow = 10s;
   constexpr auto kSettle = std::chrono::nanoseconds(5s);
   constexpr auto kAccuracyWindow = std::chrono::nanoseconds(10s);
   constexpr double kMaxErrorDeg = 2.0;
+  // The rotation angle between two orientations is a metric that rotations leave unchanged, so the error of
+  // q_parent* (x) q_child is at most the parent's error plus the child's.
+  constexpr double kMaxJointErrorDeg = 2.0 * kMaxErrorDeg;
   constexpr double kMinMatchedShare = 0.90;
 
   Observed obs;
@@ -254,6 +318,23 @@ TEST_F(LiveSystem, LiveAccuracy) {
       const Clock::time_point first = j.arrivals.front();
       const std::size_t n = count_between(j.arrivals, first, first + kRateWindow);
       EXPECT_GE(static_cast<double>(n), kMinRateShare * kRateHz * 10.0) << "joint samples in 10 s";
+
+      // Values, over the sensor-time window in which both segments' estimates are checked.
+      const auto axes = fusion::parse_axis_sequence(j.axes);
+      ASSERT_TRUE(axes.has_value());
+      const std::uint64_t from =
+          std::max(obs.estimates[j.parent].front().timestamp_ns, obs.estimates[j.child].front().timestamp_ns) +
+          static_cast<std::uint64_t>(kSettle.count());
+      const JointAccuracy a =
+          joint_accuracy(j, obs.estimates[j.parent], obs.estimates[j.child], obs.truth[j.parent], obs.truth[j.child],
+                         from, from + static_cast<std::uint64_t>(kAccuracyWindow.count()), *axes);
+      EXPECT_GE(static_cast<double>(a.in_window), kMinRateShare * kRateHz * 10.0) << "joints in the accuracy window";
+      EXPECT_GE(static_cast<double>(a.matched), kMinMatchedShare * static_cast<double>(a.in_window))
+          << a.matched << " of " << a.in_window << " joint samples found their two estimates and truths";
+      EXPECT_LT(a.max_error_deg, kMaxJointErrorDeg) << "joint quaternion";
+      EXPECT_LT(a.max_angles_error_deg, kMaxJointErrorDeg) << "joint angles";
+      std::printf("[ measure  ] %s: %zu/%zu matched, max error %.3f deg (quaternion), %.3f deg (angles)\n",
+                  joint.c_str(), a.matched, a.in_window, a.max_error_deg, a.max_angles_error_deg);
     }
     EXPECT_EQ(obs.joints.size(), expected_joints.size()) << "unexpected joints on " << dds::kJointAnglesTopic;
   }

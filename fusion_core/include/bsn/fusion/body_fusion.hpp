@@ -1,0 +1,98 @@
+// The per-sample pipeline of one body: calibration -> input gate -> filter -> joint angles, with the per-node
+// counters bsn/status reports. No clocks and no logging: arrival times are arguments, and what a service logs
+// (clock reset, node stale or fresh, a new unknown node) comes back as events.
+#pragma once
+
+#include <span>
+#include <unordered_map>
+
+#include "bsn/calib/sensor_calibration.hpp"
+#include "bsn/fusion/body_model.hpp"
+#include "bsn/fusion/sample_gate.hpp"
+
+namespace bsn::fusion {
+
+/// One raw sample as a node sent it: node id, the node's sequence number, uncalibrated values on the sensor clock.
+struct NodeSample {
+  std::string_view node;
+  std::uint64_t seq = 0;
+  ImuSample imu;
+};
+
+/// The joint from a segment's parent to the segment, at the segment's sample.
+struct JointEstimate {
+  std::size_t parent = 0, child = 0;  ///< segment indices
+  Quat relative;                      ///< q_parent* (x) q_child, w >= 0
+  Vec3 angles;                        ///< relative decomposed in the child's joint_axes, rad
+  bool stale = false;                 ///< the parent's or the child's node is stale
+  bool initialising = false;          ///< the parent's or the child's filter is initialising
+};
+
+enum class SampleOutcome { kEstimated, kGateRejected, kFilterRejected, kUnknownNode };
+
+struct SampleResult {
+  SampleOutcome outcome = SampleOutcome::kUnknownNode;
+  std::size_t segment = 0;                           ///< unless kUnknownNode
+  SampleVerdict verdict = SampleVerdict::kAccepted;  ///< the gate's (why kGateRejected), unless kUnknownNode
+  bool node_fresh = false;                           ///< event: the node was stale and sends again
+  bool clock_reset = false;       ///< event: the node's clock moved to a new time base; its filter restarted
+  bool new_unknown_node = false;  ///< event: first sample of an unknown node, which is now listed
+  // With kEstimated: the segment's orientation (sensor-to-earth), the filter's flags and gyro bias (rad/s).
+  Quat orientation = Quat::Identity();
+  FilterFlags flags;
+  Vec3 gyro_bias = Vec3::Zero();
+  std::optional<JointEstimate> joint;  ///< the joint to the parent, once the parent has an orientation
+};
+
+class BodyFusion {
+ public:
+  struct Params {
+    /// A node with no sample for this long is reported stale, s. Default 0.3 s (30 samples at 100 Hz).
+    double stale_timeout_s = 0.3;
+    /// A node that never sent is reported stale this long after the start, s: time for discovery.
+    double discovery_grace_s = 2.0;
+    SampleGate::Params gate;
+  };
+  /// Per node id: the calibration applied to every raw sample (u = H (raw - B)) before the gate and filter.
+  using Calibrations = std::unordered_map<std::string, calib::SensorCalibration>;
+  static constexpr std::size_t kMaxUnknownNodesListed = 16;
+
+  /// One segment's pipeline and what bsn/status reports of its node.
+  struct Segment {
+    std::unique_ptr<OrientationFilter> filter;
+    SampleGate gate;  ///< counts received, accepted, missing, clock resets, rejected by reason
+    calib::SensorCalibration calibration;
+    std::optional<std::size_t> parent;
+    std::uint64_t filter_rejected = 0;  ///< passed the gate, not used by the filter
+    std::optional<Quat> q;              ///< the last orientation
+    FilterFlags flags;                  ///< of the last orientation
+    std::optional<std::uint64_t> last_arrival_ns;
+    bool stale = false;  ///< silent for the stale timeout (or, never heard of, the discovery grace)
+  };
+
+  /// start_ns: the start on the arrival clock (monotonic, ns), from which the discovery grace runs.
+  /// Throws std::invalid_argument for a filter spec or gate parameters that make_filter or SampleGate refuse.
+  BodyFusion(BodyModel body, const Calibrations& calibrations, const Params& params, std::uint64_t start_ns);
+
+  /// Runs one sample through its segment's pipeline; the result is valid until the next call.
+  const SampleResult& process(const NodeSample& sample, std::uint64_t arrival_ns);
+  /// Marks the nodes silent at now_ns stale; returns the segments that turned stale with this call.
+  std::span<const std::size_t> check_stale(std::uint64_t now_ns);
+
+  const BodyModel& body() const { return body_; }
+  const Segment& segment(std::size_t index) const { return segments_.at(index); }
+  std::uint64_t unknown_node_samples() const { return unknown_node_samples_; }
+  /// The first kMaxUnknownNodesListed unknown node ids, in order of their first sample.
+  const std::vector<std::string>& unknown_nodes() const { return unknown_nodes_; }
+
+ private:
+  BodyModel body_;
+  std::uint64_t stale_timeout_ns_, discovery_end_ns_;
+  std::vector<Segment> segments_;
+  std::uint64_t unknown_node_samples_ = 0;
+  std::vector<std::string> unknown_nodes_;
+  SampleResult result_;
+  std::vector<std::size_t> turned_stale_;
+};
+
+}  // namespace bsn::fusion

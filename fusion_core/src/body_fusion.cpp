@@ -1,0 +1,95 @@
+#include "bsn/fusion/body_fusion.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+namespace bsn::fusion {
+namespace {
+
+std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(std::max(0.0, s) * 1e9)); }
+
+// u = H (raw - B) on every calibrated channel that the sample carries.
+void apply_calibration(const calib::SensorCalibration& c, ImuSample& s) {
+  if (c.accelerometer && s.has_acc) s.acc = calib::apply(*c.accelerometer, s.acc);
+  if (c.gyroscope && s.has_gyr) s.gyr = calib::apply(*c.gyroscope, s.gyr);
+  if (c.magnetometer && s.has_mag) s.mag = calib::apply(*c.magnetometer, s.mag);
+}
+
+}  // namespace
+
+BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const Params& params, std::uint64_t start_ns)
+    : body_(std::move(body)),
+      stale_timeout_ns_(seconds_to_ns(params.stale_timeout_s)),
+      discovery_end_ns_(start_ns + seconds_to_ns(params.discovery_grace_s)),
+      segments_(body_.segments.size()) {
+  turned_stale_.reserve(segments_.size());
+  for (std::size_t i = 0; i < segments_.size(); ++i) {
+    const SegmentSpec& spec = body_.segments[i];
+    segments_[i].filter = make_filter(spec.filter);
+    segments_[i].gate = SampleGate(params.gate);
+    if (const auto c = calibrations.find(spec.node); c != calibrations.end()) segments_[i].calibration = c->second;
+    segments_[i].parent = body_.find_segment(spec.parent);
+  }
+}
+
+const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arrival_ns) {
+  SampleResult& r = result_ = SampleResult{};
+  const std::optional<std::size_t> index = body_.find_node(in.node);
+  if (!index) {
+    ++unknown_node_samples_;
+    r.new_unknown_node = unknown_nodes_.size() < kMaxUnknownNodesListed &&
+                         std::find(unknown_nodes_.begin(), unknown_nodes_.end(), in.node) == unknown_nodes_.end();
+    if (r.new_unknown_node) unknown_nodes_.emplace_back(in.node);
+    return r;
+  }
+  r.segment = *index;
+  Segment& seg = segments_[r.segment];
+  seg.last_arrival_ns = arrival_ns;
+  r.node_fresh = std::exchange(seg.stale, false);
+
+  ImuSample s = in.imu;
+  apply_calibration(seg.calibration, s);
+  r.verdict = seg.gate.check(in.seq, s);
+  r.clock_reset = r.verdict == SampleVerdict::kAcceptedClockReset;
+  if (r.clock_reset) {
+    seg.filter->reset();
+  } else if (r.verdict != SampleVerdict::kAccepted) {
+    r.outcome = SampleOutcome::kGateRejected;  // counted by the gate
+    return r;
+  }
+  if (seg.filter->update(s) == UpdateResult::kRejected) {
+    ++seg.filter_rejected;
+    r.outcome = SampleOutcome::kFilterRejected;
+    return r;
+  }
+  r.outcome = SampleOutcome::kEstimated;
+  r.orientation = *(seg.q = seg.filter->orientation());
+  r.flags = seg.flags = seg.filter->flags();
+  r.gyro_bias = seg.filter->gyro_bias();
+  if (const Segment* parent = seg.parent ? &segments_[*seg.parent] : nullptr; parent && parent->q) {
+    const Quat relative = canonical(relative_orientation(*parent->q, *seg.q));
+    r.joint = JointEstimate{*seg.parent,
+                            r.segment,
+                            relative,
+                            decompose(relative, body_.segments[r.segment].joint_axes),
+                            parent->stale || seg.stale,
+                            parent->flags.initialising || seg.flags.initialising};
+  }
+  return r;
+}
+
+std::span<const std::size_t> BodyFusion::check_stale(std::uint64_t now_ns) {
+  turned_stale_.clear();
+  for (std::size_t i = 0; i < segments_.size(); ++i) {
+    Segment& seg = segments_[i];
+    // A node that never sent gets a grace period for discovery before it counts as stale.
+    const bool silent =
+        seg.last_arrival_ns ? now_ns > *seg.last_arrival_ns + stale_timeout_ns_ : now_ns > discovery_end_ns_;
+    if (silent && !seg.stale) turned_stale_.push_back(i);
+    seg.stale = seg.stale || silent;
+  }
+  return turned_stale_;
+}
+
+}  // namespace bsn::fusion
