@@ -89,35 +89,32 @@ struct Observed {
 class Subscriber {
  public:
   Subscriber(int domain, Observed& obs) : participant_({domain, "bsn integration test"}) {
-    orientation_ = participant_.make_reader<bsn::Orientation>(
-        dds::kOrientationTopic, dds::TopicQos::kEstimate, [&obs](const bsn::Orientation& o, const SampleInfo&) {
+    orientation_ =
+        participant_.make_reader(dds::kOrientationTopic, [&obs](const bsn::Orientation& o, const SampleInfo&) {
           const auto now = Clock::now();
           std::lock_guard lock(obs.mutex);
           obs.estimates[o.segment()].push_back({now, o.timestamp_ns(), o.quat()});
         });
-    truth_ = participant_.make_reader<bsn::Orientation>(dds::kTruthOrientationTopic, dds::TopicQos::kEstimate,
-                                                        [&obs](const bsn::Orientation& o, const SampleInfo&) {
-                                                          std::lock_guard lock(obs.mutex);
-                                                          obs.truth[o.segment()][o.timestamp_ns()] = o.quat();
-                                                        });
-    joints_ = participant_.make_reader<bsn::JointAngles>(dds::kJointAnglesTopic, dds::TopicQos::kEstimate,
-                                                         [&obs](const bsn::JointAngles& j, const SampleInfo&) {
-                                                           const auto now = Clock::now();
-                                                           std::lock_guard lock(obs.mutex);
-                                                           JointSeen& seen = obs.joints[j.joint()];
-                                                           seen.parent = j.parent();
-                                                           seen.child = j.child();
-                                                           seen.axes = j.axes();
-                                                           seen.arrivals.push_back(now);
-                                                           for (double a : j.angles())
-                                                             seen.all_finite = seen.all_finite && std::isfinite(a);
-                                                         });
-    status_ = participant_.make_reader<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched,
-                                                    [&obs](const bsn::Status& s, const SampleInfo&) {
-                                                      const auto now = Clock::now();
-                                                      std::lock_guard lock(obs.mutex);
-                                                      obs.statuses.push_back({now, s});
-                                                    });
+    truth_ =
+        participant_.make_reader(dds::kTruthOrientationTopic, [&obs](const bsn::Orientation& o, const SampleInfo&) {
+          std::lock_guard lock(obs.mutex);
+          obs.truth[o.segment()][o.timestamp_ns()] = o.quat();
+        });
+    joints_ = participant_.make_reader(dds::kJointAnglesTopic, [&obs](const bsn::JointAngles& j, const SampleInfo&) {
+      const auto now = Clock::now();
+      std::lock_guard lock(obs.mutex);
+      JointSeen& seen = obs.joints[j.joint()];
+      seen.parent = j.parent();
+      seen.child = j.child();
+      seen.axes = j.axes();
+      seen.arrivals.push_back(now);
+      for (double a : j.angles()) seen.all_finite = seen.all_finite && std::isfinite(a);
+    });
+    status_ = participant_.make_reader(dds::kStatusTopic, [&obs](const bsn::Status& s, const SampleInfo&) {
+      const auto now = Clock::now();
+      std::lock_guard lock(obs.mutex);
+      obs.statuses.push_back({now, s});
+    });
   }
 
  private:
@@ -245,7 +242,7 @@ TEST_F(LiveSystem, LiveAccuracy) {
     for (const auto& [joint, pcx] : expected_joints) {
       SCOPED_TRACE("joint " + joint);
       auto it = obs.joints.find(joint);
-      ASSERT_NE(it, obs.joints.end()) << "no sample on " << dds::kJointAnglesTopic;
+      ASSERT_NE(it, obs.joints.end()) << "no sample on " << dds::kJointAnglesTopic.name;
       const JointSeen& j = it->second;
       EXPECT_EQ(j.parent, pcx[0]);
       EXPECT_EQ(j.child, pcx[1]);
@@ -255,7 +252,7 @@ TEST_F(LiveSystem, LiveAccuracy) {
       const std::size_t n = count_between(j.arrivals, first, first + kRateWindow);
       EXPECT_GE(static_cast<double>(n), kMinRateShare * kRateHz * 10.0) << "joint samples in 10 s";
     }
-    EXPECT_EQ(obs.joints.size(), expected_joints.size()) << "unexpected joints on " << dds::kJointAnglesTopic;
+    EXPECT_EQ(obs.joints.size(), expected_joints.size()) << "unexpected joints on " << dds::kJointAnglesTopic.name;
   }
 
   stop_chain();
