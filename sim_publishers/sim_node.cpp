@@ -11,7 +11,6 @@
 
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/log.hpp"
-#include "bsn/dds/participant.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/io/recording.hpp"
 #include "bsn/sim/scenario_file.hpp"
@@ -73,10 +72,9 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   const Body body = build_body(spec);
   const std::string segment = !opt.segment.empty() ? opt.segment : body.size() == 1 ? body.segment(0).name : opt.node;
   ScenarioRunner runner(spec, {segment}, opt.ideal);
-  dds::install_shutdown_handlers();
-  dds::Participant participant({opt.domain, "bsn sim " + opt.node});
-  auto raw_writer = participant.make_writer<bsn::RawSample>(dds::kRawTopic, dds::TopicQos::kSensorData);
-  auto truth_writer = participant.make_writer<bsn::Orientation>(dds::kTruthOrientationTopic, dds::TopicQos::kEstimate);
+  services::DdsCommandFrame frame(opt.domain, "bsn sim " + opt.node);
+  auto raw_writer = frame.participant().make_writer(dds::kRawTopic);
+  auto truth_writer = frame.participant().make_writer(dds::kTruthOrientationTopic);
   dds::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
                 spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain);
   bsn::RawSample raw;
@@ -159,6 +157,31 @@ int run_sim_node(const SimNodeOptions& opt) {
   const std::string segment = opt.segment.empty() ? opt.node : opt.segment;
   const std::uint64_t seed = opt.seed != 0 ? opt.seed : std::hash<std::string>{}(opt.node);
   return publish_scenario(swing_scenario(segment, seed, opt.rate_hz, opt.duration_s), opt);
+}
+
+services::Command sim_command() {
+  return {"sim", "Simulated sensor node: publishes bsn/raw and bsn/truth/orientation", [](CLI::App* cmd) {
+            auto opt = std::make_shared<SimNodeOptions>();
+            cmd->add_option("--node", opt->node, "node id on bsn/raw (required unless --scenario with --out)");
+            cmd->add_option("--segment", opt->segment, "segment name on bsn/truth/orientation (default: node id)");
+            cmd->add_option("--rate", opt->rate_hz, "sample rate in Hz")->capture_default_str();
+            cmd->add_option("--seed", opt->seed, "motion and noise seed (default: from the node id)");
+            cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)");
+            cmd->add_flag("--ideal", opt->ideal, "no sensor noise (with --scenario: every sensor error off)");
+            cmd->add_option("--scenario", opt->scenario,
+                            "scenario YAML file: publish its segment --segment (default: node id)")
+                ->check(CLI::ExistingFile);
+            cmd->add_option("--speed", opt->speed, "with --scenario: publish N times faster than real time")
+                ->capture_default_str();
+            cmd->add_option("--out", opt->out_dir, "with --scenario: write DIR/<segment>.hdf5 (BROAD layout) and exit");
+            services::add_domain_option(cmd, opt->domain);
+            return [opt, cmd] {
+              if (opt->scenario.empty() && opt->node.empty()) throw CLI::RequiredError("--node");
+              opt->rate_given = cmd->count("--rate") > 0;
+              dds::set_log_identity("sim " + (opt->node.empty() ? std::string("scenario") : opt->node));
+              return run_sim_node(*opt);
+            };
+          }};
 }
 
 }  // namespace bsn::sim

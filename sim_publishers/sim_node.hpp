@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <string>
 
+#include "command.hpp"
+
 namespace bsn::sim {
 
 struct SimNodeOptions {
@@ -24,5 +26,8 @@ struct SimNodeOptions {
 
 /// Runs until the duration ends or a signal arrives. Returns the process exit code.
 int run_sim_node(const SimNodeOptions& options);
+
+/// `bsn sim`: its options and run_sim_node.
+services::Command sim_command();
 
 }  // namespace bsn::sim

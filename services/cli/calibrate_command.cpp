@@ -17,6 +17,20 @@
 namespace bsn::services {
 namespace {
 
+struct CalibrateOptions {
+  std::string input;              ///< recording to calibrate (CSV or BROAD HDF5): hand-turned poses
+  std::string allan;              ///< static recording for the Allan deviation instead
+  double field_magnitude = 1.0;   ///< M: |calibrated magnetometer| (1 = normalised; 50 for uT, ...)
+  bool json = false;              ///< print the JSON object instead of the text report
+  std::string output;             ///< calibration file to write ("" = INPUT with extension .calib.yaml)
+  std::string node;               ///< node id written into the file
+  bool accelerometer = false;     ///< also calibrate the accelerometer (|g| = 9.80665 m/s^2)
+  bool gyro_bias = false;         ///< also write the gyro bias from the rests
+  double rest_rate_rad_s = 0.05;  ///< rest threshold on |gyro - bias|, rad/s
+  double min_pose_s = 1.0;        ///< shortest rest that counts as a pose, s
+  std::string plot;               ///< with --allan: write the curves as an SVG here
+};
+
 using calib::FieldCalibration;
 using calib::Points3;
 
@@ -273,14 +287,36 @@ int run_allan(const CalibrateOptions& opt) {
   return 0;
 }
 
-}  // namespace
-
+/// Runs the command; returns the process exit code (0 ok, 1 the data do not calibrate, 2 unreadable input).
 int run_calibrate(const CalibrateOptions& options) {
   if (options.input.empty() == options.allan.empty()) {
     std::fprintf(stderr, "bsn calibrate: give exactly one of --input FILE or --allan FILE\n");
     return 2;
   }
   return options.allan.empty() ? run_fit(options) : run_allan(options);
+}
+
+}  // namespace
+
+Command calibrate_command() {
+  return {"calibrate", "Calibrate a hand-turned recording (magnetometer, accelerometer) or identify noise (--allan)",
+          [](CLI::App* cmd) {
+            auto opt = std::make_shared<CalibrateOptions>();
+            cmd->add_option("--input", opt->input, "recording (CSV, BROAD HDF5) of still poses turned by hand");
+            cmd->add_option("--allan", opt->allan, "static recording: print Allan noise figures instead");
+            cmd->add_option("--field-magnitude", opt->field_magnitude, "|calibrated magnetometer|, M")
+                ->capture_default_str();
+            cmd->add_flag("--json", opt->json, "print the magnetometer calibration as one JSON object");
+            cmd->add_option("--output", opt->output, "calibration file to write (default: INPUT.calib.yaml)");
+            cmd->add_option("--node", opt->node, "node id to record in the calibration file");
+            cmd->add_flag("--accelerometer", opt->accelerometer, "also calibrate the accelerometer (|g|)");
+            cmd->add_flag("--gyro-bias", opt->gyro_bias, "also write the gyro bias measured at rest");
+            cmd->add_option("--rest-threshold", opt->rest_rate_rad_s, "rest when |gyro - bias| < this, rad/s")
+                ->capture_default_str();
+            cmd->add_option("--min-pose", opt->min_pose_s, "shortest rest counted as a pose, s")->capture_default_str();
+            cmd->add_option("--plot", opt->plot, "with --allan: write the Allan curves as SVG");
+            return [opt] { return run_calibrate(*opt); };
+          }};
 }
 
 }  // namespace bsn::services

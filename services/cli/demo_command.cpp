@@ -9,6 +9,7 @@
 #include <map>
 #include <mutex>
 #include <numbers>
+#include <string>
 
 #include "bsn/dds/body_config.hpp"
 #include "bsn/dds/child_process.hpp"
@@ -19,6 +20,13 @@
 
 namespace bsn::services {
 namespace {
+
+struct DemoOptions {
+  double duration_s = 0.0;  ///< stop after this long, s (0 = until Ctrl-C)
+  std::string body_path;    ///< "" = default 7-segment lower body
+  double rate_hz = 100.0;   ///< sample rate of the simulated nodes
+  int domain = 0;
+};
 
 using Clock = std::chrono::steady_clock;
 constexpr double kDeg = 180.0 / std::numbers::pi;
@@ -69,8 +77,7 @@ std::string render(DemoView& view, const std::vector<std::string>& joint_order, 
   return out;
 }
 
-}  // namespace
-
+/// Starts one `bsn sim` per segment and one `bsn fusion`, shows the joint angles live, and stops them all.
 int run_demo(const DemoOptions& opt) {
   fusion::BodyModel body;
   try {
@@ -101,21 +108,19 @@ int run_demo(const DemoOptions& opt) {
   int exit_code = 0;
   {
     dds::Participant participant({opt.domain, "bsn demo"});
-    auto joint_reader = participant.make_reader<bsn::JointAngles>(
-        dds::kJointAnglesTopic, dds::TopicQos::kEstimate,
-        [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo&) {
+    auto joint_reader = participant.make_reader(
+        dds::kJointAnglesTopic, [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo&) {
           std::lock_guard lock(view.mutex);
           auto& v = view.joints[j.joint()];
           v.latest = j;
           ++v.count;
         });
-    auto status_reader =
-        participant.make_reader<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched,
-                                             [&view](const bsn::Status& s, const eprosima::fastdds::dds::SampleInfo&) {
-                                               std::lock_guard lock(view.mutex);
-                                               view.status = s;
-                                               view.have_status = true;
-                                             });
+    auto status_reader = participant.make_reader(
+        dds::kStatusTopic, [&view](const bsn::Status& s, const eprosima::fastdds::dds::SampleInfo&) {
+          std::lock_guard lock(view.mutex);
+          view.status = s;
+          view.have_status = true;
+        });
 
     std::vector<std::unique_ptr<dds::ChildProcess>> sims;
     std::unique_ptr<dds::ChildProcess> fusion_process;
@@ -184,6 +189,20 @@ int run_demo(const DemoOptions& opt) {
     dds::log_error("logs kept in ", dir.string());
   }
   return exit_code;
+}
+
+}  // namespace
+
+Command demo_command() {
+  return {"demo", "Simulated lower body + fusion, live joint angles in the terminal", [](CLI::App* cmd) {
+            auto opt = std::make_shared<DemoOptions>();
+            cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)")
+                ->check(CLI::NonNegativeNumber);
+            cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
+            cmd->add_option("--rate", opt->rate_hz, "sample rate of the simulated nodes, Hz")->capture_default_str();
+            add_domain_option(cmd, opt->domain);
+            return [opt] { return run_demo(*opt); };
+          }};
 }
 
 }  // namespace bsn::services

@@ -1,17 +1,25 @@
 #include "echo_command.hpp"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <mutex>
+#include <string>
 
-#include "bsn/dds/log.hpp"
-#include "bsn/dds/participant.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "format.hpp"
 
 namespace bsn::services {
 namespace {
+
+struct EchoOptions {
+  std::string topic;
+  long count = 0;          ///< stop after this many samples (0 = never)
+  double rate_hz = 0.0;    ///< print at most this many samples per second (0 = all)
+  double timeout_s = 0.0;  ///< exit 1 if not `count` samples within this time (0 = wait forever)
+  int domain = 0;
+};
 
 using Clock = std::chrono::steady_clock;
 
@@ -38,65 +46,67 @@ struct Printer {
   }
 };
 
+// One line per sample; an orientation line says which of the two orientation topics it comes from.
+std::string format_line(const bsn::Orientation& s, std::string_view topic) {
+  return format_sample(s, topic == dds::kTruthOrientationTopic.name ? "truth" : "orientation");
+}
 template <class T>
-std::unique_ptr<dds::Reader<T>> subscribe(dds::Participant& p, const char* topic, dds::TopicQos qos, Printer& printer,
-                                          const char* prefix = nullptr) {
-  return p.make_reader<T>(topic, qos, [&printer, prefix](const T& s, const eprosima::fastdds::dds::SampleInfo&) {
-    if constexpr (std::is_same_v<T, bsn::Orientation>) {
-      printer.print(format_sample(s, prefix));
-    } else {
-      printer.print(format_sample(s));
+std::string format_line(const T& s, std::string_view) {
+  return format_sample(s);
+}
+
+std::vector<std::string> topic_names() {
+  std::vector<std::string> names;
+  dds::for_each_topic([&names](const auto& topic) { names.emplace_back(topic.name); });
+  return names;
+}
+
+std::string topic_list() {
+  std::string list;
+  for (const std::string& n : topic_names()) list += (list.empty() ? "" : ", ") + n;
+  return list;
+}
+
+int run_echo(const EchoOptions& opt) {
+  if (const auto names = topic_names(); std::find(names.begin(), names.end(), opt.topic) == names.end()) {
+    const std::string near = nearest_name(opt.topic, names);
+    std::fprintf(stderr, "bsn echo: error: unknown topic '%s'%s (known: %s)\n", opt.topic.c_str(),
+                 near.empty() ? "" : ("; did you mean '" + near + "'?").c_str(), topic_list().c_str());
+    return 2;
+  }
+  Printer printer(opt);
+  DdsCommandFrame frame(opt.domain, "bsn echo");
+  std::shared_ptr<void> reader;  // of the one topic named, whatever its type
+  dds::for_each_topic([&](const auto& topic) {
+    if (opt.topic != topic.name) return;
+    reader = frame.participant().make_reader(
+        topic, [&printer, name = topic.name](const auto& s, const auto&) { printer.print(format_line(s, name)); });
+  });
+  const auto start = Clock::now();
+  return frame.run_ticks(std::chrono::milliseconds(20), [&]() -> std::optional<int> {
+    if (opt.timeout_s > 0.0 && Clock::now() - start > std::chrono::duration<double>(opt.timeout_s)) {
+      std::fprintf(stderr, "bsn echo: timeout: %ld of %ld samples on %s within %.1f s\n", printer.printed.load(),
+                   opt.count, opt.topic.c_str(), opt.timeout_s);
+      return 1;
     }
+    return std::nullopt;
   });
 }
 
 }  // namespace
 
-std::string echo_topic_list() {
-  return std::string(dds::kRawTopic) + ", " + dds::kOrientationTopic + ", " + dds::kJointAnglesTopic + ", " +
-         dds::kStatusTopic + ", " + dds::kTruthOrientationTopic + ", " + dds::kCalibrationRequestTopic + ", " +
-         dds::kCalibrationResultTopic;
-}
-
-int run_echo(const EchoOptions& opt) {
-  dds::install_shutdown_handlers();
-  Printer printer(opt);
-  dds::Participant participant({opt.domain, "bsn echo"});
-  // Keep the reader alive for the loop; the variant per topic holds it.
-  std::shared_ptr<void> reader;
-  const std::string& t = opt.topic;
-  if (t == dds::kRawTopic) {
-    reader = subscribe<bsn::RawSample>(participant, dds::kRawTopic, dds::TopicQos::kSensorData, printer);
-  } else if (t == dds::kOrientationTopic) {
-    reader = subscribe<bsn::Orientation>(participant, dds::kOrientationTopic, dds::TopicQos::kEstimate, printer,
-                                         "orientation");
-  } else if (t == dds::kTruthOrientationTopic) {
-    reader = subscribe<bsn::Orientation>(participant, dds::kTruthOrientationTopic, dds::TopicQos::kEstimate, printer,
-                                         "truth");
-  } else if (t == dds::kJointAnglesTopic) {
-    reader = subscribe<bsn::JointAngles>(participant, dds::kJointAnglesTopic, dds::TopicQos::kEstimate, printer);
-  } else if (t == dds::kStatusTopic) {
-    reader = subscribe<bsn::Status>(participant, dds::kStatusTopic, dds::TopicQos::kLatched, printer);
-  } else if (t == dds::kCalibrationRequestTopic) {
-    reader = subscribe<bsn::CalibrationRequest>(participant, dds::kCalibrationRequestTopic, dds::TopicQos::kCommand,
-                                                printer);
-  } else if (t == dds::kCalibrationResultTopic) {
-    reader =
-        subscribe<bsn::CalibrationResult>(participant, dds::kCalibrationResultTopic, dds::TopicQos::kLatched, printer);
-  } else {
-    std::fprintf(stderr, "bsn echo: error: unknown topic '%s' (known: %s)\n", t.c_str(), echo_topic_list().c_str());
-    return 2;
-  }
-  const auto start = Clock::now();
-  while (dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
-    if (opt.timeout_s > 0.0 && Clock::now() - start > std::chrono::duration<double>(opt.timeout_s)) {
-      std::fprintf(stderr, "bsn echo: timeout: %ld of %ld samples on %s within %.1f s\n", printer.printed.load(),
-                   opt.count, t.c_str(), opt.timeout_s);
-      return 1;
-    }
-  }
-  reader.reset();
-  return 0;
+Command echo_command() {
+  return {
+      "echo", "Print a bsn topic live, one line per sample, in degrees", [](CLI::App* cmd) {
+        auto opt = std::make_shared<EchoOptions>();
+        cmd->add_option("topic", opt->topic, "one of: " + topic_list())->required();
+        cmd->add_option("--count", opt->count, "exit after N samples")->check(CLI::NonNegativeNumber);
+        cmd->add_option("--rate", opt->rate_hz, "print at most HZ samples per second")->check(CLI::NonNegativeNumber);
+        cmd->add_option("--timeout", opt->timeout_s, "exit 1 if --count samples have not arrived within S seconds")
+            ->check(CLI::NonNegativeNumber);
+        add_domain_option(cmd, opt->domain);
+        return [opt] { return run_echo(*opt); };
+      }};
 }
 
 }  // namespace bsn::services

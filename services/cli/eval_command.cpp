@@ -6,12 +6,21 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <string>
+#include <vector>
 
 #include "bsn/eval/evaluation.hpp"
 #include "bsn/io/recording.hpp"
 
 namespace bsn::services {
 namespace {
+
+struct EvalOptions {
+  std::vector<std::string> inputs;   ///< files (.hdf5 BROAD layout, .csv) or folders of them
+  std::vector<std::string> filters;  ///< "name" or "name:key=value,...", or "all"; empty = all
+  bool json = false;                 ///< print the JSON object instead of the table
+  std::string plot_path;             ///< write an SVG of error over time here ("" = no plot)
+};
 
 namespace fs = std::filesystem;
 
@@ -61,8 +70,6 @@ class ProgressBar {
   std::size_t total_;
   bool enabled_;
 };
-
-}  // namespace
 
 int run_eval(const EvalOptions& opt) {
   std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
@@ -134,6 +141,21 @@ int run_eval(const EvalOptions& opt) {
     if (!opt.json) std::printf("plot: %s\n", opt.plot_path.c_str());
   }
   return exit_code;
+}
+
+}  // namespace
+
+Command eval_command() {
+  return {"eval", "Score filters against the reference of recordings (BROAD HDF5, CSV)", [](CLI::App* cmd) {
+            auto opt = std::make_shared<EvalOptions>();
+            cmd->add_option("inputs", opt->inputs, "recordings (.hdf5 in BROAD layout, .csv) or folders of them")
+                ->required();
+            cmd->add_option("--filter", opt->filters, "NAME or NAME:key=value,...; repeatable; 'all' = every filter")
+                ->take_all();
+            cmd->add_flag("--json", opt->json, "print one JSON object instead of the table");
+            cmd->add_option("--plot", opt->plot_path, "write an SVG image of the total error over time per filter");
+            return [opt] { return run_eval(*opt); };
+          }};
 }
 
 }  // namespace bsn::services

@@ -1,14 +1,22 @@
 #include "fusion_command.hpp"
 
 #include <cstdio>
-#include <thread>
+#include <string>
 
 #include "bsn/dds/body_config.hpp"
 #include "bsn/dds/calibration_file.hpp"
 #include "bsn/dds/log.hpp"
-#include "bsn/dds/shutdown.hpp"
+#include "fusion_service.hpp"
 
 namespace bsn::services {
+namespace {
+
+struct FusionCommandOptions {
+  std::string body_path;  ///< "" = the default 7-segment lower body
+  bool print_body = false;
+  int domain = 0;
+  FusionService::Options service;
+};
 
 int run_fusion(const FusionCommandOptions& opt) {
   fusion::BodyModel body;
@@ -24,19 +32,38 @@ int run_fusion(const FusionCommandOptions& opt) {
     std::fputs(dds::body_model_to_yaml(body).c_str(), stdout);
     return 0;
   }
-  dds::install_shutdown_handlers();
-  try {
-    dds::Participant participant({opt.domain, "bsn fusion"});
-    FusionService service(participant, body, service_options);
-    dds::log_info("fusing ", body.segments.size(), " segments of '", body.name.empty() ? opt.body_path : body.name,
-                  "' in domain ", opt.domain);
-    while (dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) service.tick();
-  } catch (const std::exception& e) {
-    dds::log_error(e.what());
-    return 1;
-  }
+  DdsCommandFrame frame(opt.domain, "bsn fusion");
+  FusionService service(frame.participant(), body, service_options);
+  dds::log_info("fusing ", body.segments.size(), " segments of '", body.name.empty() ? opt.body_path : body.name,
+                "' in domain ", opt.domain);
+  const int exit_code = frame.run_ticks(std::chrono::milliseconds(20), [&service] {
+    service.tick();
+    return std::optional<int>();
+  });
   dds::log_info("stopped");
-  return 0;
+  return exit_code;
+}
+
+}  // namespace
+
+Command fusion_command() {
+  return {"fusion", "Fusion service: one filter per body segment", [](CLI::App* cmd) {
+            auto opt = std::make_shared<FusionCommandOptions>();
+            cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
+            cmd->add_flag("--print-body", opt->print_body, "print the body model in effect as YAML and exit");
+            cmd->add_option("--stale-timeout", opt->service.stale_timeout_s,
+                            "seconds without samples before a node is stale")
+                ->capture_default_str();
+            cmd->add_option("--status-period", opt->service.status_period_s, "seconds between bsn/status samples")
+                ->capture_default_str();
+            cmd->add_flag("--best-effort", opt->service.best_effort,
+                          "publish orientations and joint angles BEST_EFFORT instead of RELIABLE");
+            cmd->add_option("--max-time-jump", opt->service.gate.max_forward_jump_s,
+                            "a sensor timestamp more than S seconds ahead is rejected as a jump")
+                ->capture_default_str();
+            add_domain_option(cmd, opt->domain);
+            return [opt] { return run_fusion(*opt); };
+          }};
 }
 
 }  // namespace bsn::services

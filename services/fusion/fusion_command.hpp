@@ -1,18 +1,10 @@
 #pragma once
 
-#include <string>
-
-#include "fusion_service.hpp"
+#include "command.hpp"
 
 namespace bsn::services {
 
-struct FusionCommandOptions {
-  std::string body_path;  ///< "" = the default 7-segment lower body
-  bool print_body = false;
-  int domain = 0;
-  FusionService::Options service;
-};
-
-int run_fusion(const FusionCommandOptions& options);
+/// `bsn fusion`: its options and what runs it.
+Command fusion_command();
 
 }  // namespace bsn::services

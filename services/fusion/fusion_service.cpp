@@ -32,15 +32,17 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
       fusion_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
       accepted_at_last_status_(fusion_.body().segments.size(), 0) {
   if (options_.process_id.empty()) options_.process_id = default_process_id();
-  const dds::TopicQos estimate = options_.best_effort ? dds::TopicQos::kEstimateBestEffort : dds::TopicQos::kEstimate;
-  orientation_writer_ = participant_.make_writer<bsn::Orientation>(dds::kOrientationTopic, estimate);
-  joint_writer_ = participant_.make_writer<bsn::JointAngles>(dds::kJointAnglesTopic, estimate);
-  status_writer_ = participant_.make_writer<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched);
+  // --best-effort switches both estimate topics from their own delivery to BEST_EFFORT.
+  const auto estimate = [this](const auto& topic) {
+    return options_.best_effort ? dds::TopicQos::kEstimateBestEffort : topic.qos;
+  };
+  orientation_writer_ = participant_.make_writer(dds::kOrientationTopic, estimate(dds::kOrientationTopic));
+  joint_writer_ = participant_.make_writer(dds::kJointAnglesTopic, estimate(dds::kJointAnglesTopic));
+  status_writer_ = participant_.make_writer(dds::kStatusTopic);
   last_status_ns_ = dds::monotonic_ns();
   // The reader goes last: its callback may fire as soon as it exists.
-  raw_reader_ = participant_.make_reader<bsn::RawSample>(
-      dds::kRawTopic, dds::TopicQos::kSensorData,
-      [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
+  raw_reader_ = participant_.make_reader(
+      dds::kRawTopic, [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
 }
 
 void FusionService::on_raw(const bsn::RawSample& raw) {

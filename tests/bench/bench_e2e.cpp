@@ -497,13 +497,11 @@ class Bench {
     status = std::make_unique<StatusView>(fusion->pid());
     {
       dds::Participant participant({opt_.domain, "bsn bench e2e"});
-      auto orientation_reader = participant.make_reader<bsn::Orientation>(
-          dds::kOrientationTopic, dds::TopicQos::kEstimate,
-          [&rx](const bsn::Orientation& o, const SampleInfo&) { rx.on_orientation(o); });
-      auto status_reader = participant.make_reader<bsn::Status>(
-          dds::kStatusTopic, dds::TopicQos::kLatched,
-          [&status](const bsn::Status& s, const SampleInfo&) { status->on_status(s); });
-      auto writer = participant.make_writer<bsn::RawSample>(dds::kRawTopic, dds::TopicQos::kSensorData);
+      auto orientation_reader = participant.make_reader(
+          dds::kOrientationTopic, [&rx](const bsn::Orientation& o, const SampleInfo&) { rx.on_orientation(o); });
+      auto status_reader = participant.make_reader(
+          dds::kStatusTopic, [&status](const bsn::Status& s, const SampleInfo&) { status->on_status(s); });
+      auto writer = participant.make_writer(dds::kRawTopic);
       NodeSet nodes(un, opt_.rate_hz);
 
       // Ticks run on one absolute schedule from t0, through discovery, warm-up and measurement.

@@ -70,17 +70,16 @@ TEST_F(FusionInput, BadSamples) {
 
   Seen seen;
   dds::Participant participant({kDomain, "bsn integration test"});
-  auto raw_writer = participant.make_writer<bsn::RawSample>(dds::kRawTopic, dds::TopicQos::kSensorData);
-  auto orientation_reader = participant.make_reader<bsn::Orientation>(
-      dds::kOrientationTopic, dds::TopicQos::kEstimate, [&seen](const bsn::Orientation& o, const SampleInfo&) {
+  auto raw_writer = participant.make_writer(dds::kRawTopic);
+  auto orientation_reader =
+      participant.make_reader(dds::kOrientationTopic, [&seen](const bsn::Orientation& o, const SampleInfo&) {
         std::lock_guard lock(seen.mutex);
         seen.orientations.push_back(o);
       });
-  auto status_reader = participant.make_reader<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched,
-                                                            [&seen](const bsn::Status& s, const SampleInfo&) {
-                                                              std::lock_guard lock(seen.mutex);
-                                                              seen.statuses.push_back(s);
-                                                            });
+  auto status_reader = participant.make_reader(dds::kStatusTopic, [&seen](const bsn::Status& s, const SampleInfo&) {
+    std::lock_guard lock(seen.mutex);
+    seen.statuses.push_back(s);
+  });
   ASSERT_TRUE(wait_until(
       [&] { return raw_writer->matched() > 0 && orientation_reader->matched() > 0 && status_reader->matched() > 0; },
       20s))

@@ -48,16 +48,15 @@ class CalibrationApply : public ProcessTest {
     std::mutex mutex;
     std::map<std::uint64_t, fusion::Quat> truth, estimate;
     dds::Participant participant({domain, "calibration apply test"});
-    auto est_reader = participant.make_reader<bsn::Orientation>(dds::kOrientationTopic, dds::TopicQos::kEstimate,
-                                                                [&](const bsn::Orientation& o, const auto&) {
-                                                                  std::lock_guard lock(mutex);
-                                                                  estimate[o.timestamp_ns()] = dds::to_quat(o.quat());
-                                                                });
-    auto truth_reader = participant.make_reader<bsn::Orientation>(dds::kTruthOrientationTopic, dds::TopicQos::kEstimate,
-                                                                  [&](const bsn::Orientation& o, const auto&) {
-                                                                    std::lock_guard lock(mutex);
-                                                                    truth[o.timestamp_ns()] = dds::to_quat(o.quat());
-                                                                  });
+    auto est_reader = participant.make_reader(dds::kOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
+      std::lock_guard lock(mutex);
+      estimate[o.timestamp_ns()] = dds::to_quat(o.quat());
+    });
+    auto truth_reader =
+        participant.make_reader(dds::kTruthOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
+          std::lock_guard lock(mutex);
+          truth[o.timestamp_ns()] = dds::to_quat(o.quat());
+        });
     const std::string d = std::to_string(domain);
     spawn(name + "-fusion", {"fusion", "--domain", d, "--body", (dir() / (name + ".yaml")).string()});
     // Let the fusion service match before the scenario starts, so it sees the sensor from its first sample.

@@ -96,35 +96,33 @@ struct Observed {
 class Subscriber {
  public:
   Subscriber(int domain, Observed& obs) : participant_({domain, "bsn integration test"}) {
-    orientation_ = participant_.make_reader<bsn::Orientation>(
-        dds::kOrientationTopic, dds::TopicQos::kEstimate, [&obs](const bsn::Orientation& o, const SampleInfo&) {
+    orientation_ =
+        participant_.make_reader(dds::kOrientationTopic, [&obs](const bsn::Orientation& o, const SampleInfo&) {
           const auto now = Clock::now();
           std::lock_guard lock(obs.mutex);
           obs.estimates[o.segment()].push_back({now, o.timestamp_ns(), o.quat()});
         });
-    truth_ = participant_.make_reader<bsn::Orientation>(dds::kTruthOrientationTopic, dds::TopicQos::kEstimate,
-                                                        [&obs](const bsn::Orientation& o, const SampleInfo&) {
-                                                          std::lock_guard lock(obs.mutex);
-                                                          obs.truth[o.segment()][o.timestamp_ns()] = o.quat();
-                                                        });
-    joints_ = participant_.make_reader<bsn::JointAngles>(
-        dds::kJointAnglesTopic, dds::TopicQos::kEstimate, [&obs](const bsn::JointAngles& j, const SampleInfo&) {
-          const auto now = Clock::now();
+    truth_ =
+        participant_.make_reader(dds::kTruthOrientationTopic, [&obs](const bsn::Orientation& o, const SampleInfo&) {
           std::lock_guard lock(obs.mutex);
-          JointSeen& seen = obs.joints[j.joint()];
-          seen.parent = j.parent();
-          seen.child = j.child();
-          seen.axes = j.axes();
-          seen.arrivals.push_back(now);
-          seen.samples.push_back({j.timestamp_ns(), j.quat(), j.angles()});
-          for (double a : j.angles()) seen.all_finite = seen.all_finite && std::isfinite(a);
+          obs.truth[o.segment()][o.timestamp_ns()] = o.quat();
         });
-    status_ = participant_.make_reader<bsn::Status>(dds::kStatusTopic, dds::TopicQos::kLatched,
-                                                    [&obs](const bsn::Status& s, const SampleInfo&) {
-                                                      const auto now = Clock::now();
-                                                      std::lock_guard lock(obs.mutex);
-                                                      obs.statuses.push_back({now, s});
-                                                    });
+    joints_ = participant_.make_reader(dds::kJointAnglesTopic, [&obs](const bsn::JointAngles& j, const SampleInfo&) {
+      const auto now = Clock::now();
+      std::lock_guard lock(obs.mutex);
+      JointSeen& seen = obs.joints[j.joint()];
+      seen.parent = j.parent();
+      seen.child = j.child();
+      seen.axes = j.axes();
+      seen.arrivals.push_back(now);
+      seen.samples.push_back({j.timestamp_ns(), j.quat(), j.angles()});
+      for (double a : j.angles()) seen.all_finite = seen.all_finite && std::isfinite(a);
+    });
+    status_ = participant_.make_reader(dds::kStatusTopic, [&obs](const bsn::Status& s, const SampleInfo&) {
+      const auto now = Clock::now();
+      std::lock_guard lock(obs.mutex);
+      obs.statuses.push_back({now, s});
+    });
   }
 
  private:
@@ -309,7 +307,7 @@ TEST_F(LiveSystem, LiveAccuracy) {
     for (const auto& [joint, pcx] : expected_joints) {
       SCOPED_TRACE("joint " + joint);
       auto it = obs.joints.find(joint);
-      ASSERT_NE(it, obs.joints.end()) << "no sample on " << dds::kJointAnglesTopic;
+      ASSERT_NE(it, obs.joints.end()) << "no sample on " << dds::kJointAnglesTopic.name;
       const JointSeen& j = it->second;
       EXPECT_EQ(j.parent, pcx[0]);
       EXPECT_EQ(j.child, pcx[1]);
@@ -336,7 +334,7 @@ TEST_F(LiveSystem, LiveAccuracy) {
       std::printf("[ measure  ] %s: %zu/%zu matched, max error %.3f deg (quaternion), %.3f deg (angles)\n",
                   joint.c_str(), a.matched, a.in_window, a.max_error_deg, a.max_angles_error_deg);
     }
-    EXPECT_EQ(obs.joints.size(), expected_joints.size()) << "unexpected joints on " << dds::kJointAnglesTopic;
+    EXPECT_EQ(obs.joints.size(), expected_joints.size()) << "unexpected joints on " << dds::kJointAnglesTopic.name;
   }
 
   stop_chain();

@@ -42,16 +42,14 @@ TEST_F(SimScenario, LivePublishesTheScenarioSegmentAndItsTruth) {
   std::mutex mutex;
   std::size_t raw = 0, truth = 0;
   dds::Participant participant({kDomain, "sim scenario test"});
-  auto raw_reader = participant.make_reader<bsn::RawSample>(dds::kRawTopic, dds::TopicQos::kSensorData,
-                                                            [&](const bsn::RawSample& s, const auto&) {
-                                                              std::lock_guard lock(mutex);
-                                                              raw += s.node_id() == "imu" ? 1 : 0;
-                                                            });
-  auto truth_reader = participant.make_reader<bsn::Orientation>(dds::kTruthOrientationTopic, dds::TopicQos::kEstimate,
-                                                                [&](const bsn::Orientation& o, const auto&) {
-                                                                  std::lock_guard lock(mutex);
-                                                                  truth += o.segment() == "imu" ? 1 : 0;
-                                                                });
+  auto raw_reader = participant.make_reader(dds::kRawTopic, [&](const bsn::RawSample& s, const auto&) {
+    std::lock_guard lock(mutex);
+    raw += s.node_id() == "imu" ? 1 : 0;
+  });
+  auto truth_reader = participant.make_reader(dds::kTruthOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
+    std::lock_guard lock(mutex);
+    truth += o.segment() == "imu" ? 1 : 0;
+  });
   spawn("sim", {"sim", "--scenario", kScenarios + "/fan_b.yaml", "--node", "imu", "--speed", "10", "--domain",
                 std::to_string(kDomain)});
   EXPECT_TRUE(wait_until(

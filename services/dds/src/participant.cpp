@@ -94,8 +94,9 @@ Participant::Participant(const Options& options) {
                                                                               participant_qos(options.name));
   if (!participant_)
     throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options.domain));
-  publisher_ = participant_->create_publisher(PUBLISHER_QOS_DEFAULT);
-  subscriber_ = participant_->create_subscriber(SUBSCRIBER_QOS_DEFAULT);
+  // The participant's defaults, not PUBLISHER_QOS_DEFAULT: an XML default profile applies to them.
+  publisher_ = participant_->create_publisher(participant_->get_default_publisher_qos());
+  subscriber_ = participant_->create_subscriber(participant_->get_default_subscriber_qos());
   if (!publisher_ || !subscriber_) throw std::runtime_error("cannot create a DDS publisher or subscriber");
 }
 
@@ -107,17 +108,23 @@ Participant::~Participant() {
   DomainParticipantFactory::get_instance()->delete_participant(participant_);
 }
 
-Topic* Participant::find_or_create_topic(const std::string& name, TypeSupport type) {
+eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(const std::string& name, TypeSupport type) {
   std::lock_guard lock(mutex_);
   if (auto it = topics_.find(name); it != topics_.end()) return it->second;
   if (participant_->find_type(type.get_type_name()) == nullptr) type.register_type(participant_);
-  Topic* t = participant_->create_topic(name, type.get_type_name(), TOPIC_QOS_DEFAULT);
+  eprosima::fastdds::dds::Topic* t = participant_->create_topic(name, type.get_type_name(), TOPIC_QOS_DEFAULT);
   if (!t) throw std::runtime_error("cannot create DDS topic " + name);
   topics_[name] = t;
   return t;
 }
 
-DataWriter* Participant::create_writer(Topic* topic, const DataWriterQos& qos, std::shared_ptr<EndpointEvents> events) {
+// Writers and readers start from their publisher's or subscriber's default QoS (the XML default profile, if
+// any) with bsn's delivery of the topic on top; a profile named after the topic replaces both.
+DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
+                                       std::shared_ptr<EndpointEvents> events) {
+  DataWriterQos qos = publisher_->get_default_datawriter_qos();
+  if (publisher_->get_datawriter_qos_from_profile(topic->get_name(), qos) != ReturnCode_t::RETCODE_OK)
+    qos = writer_qos(delivery, publisher_->get_default_datawriter_qos());
   events->topic = topic->get_name();
   events->mismatch_counter = &qos_mismatches_;
   auto listener = std::make_unique<WriterEvents>(events);
@@ -128,7 +135,11 @@ DataWriter* Participant::create_writer(Topic* topic, const DataWriterQos& qos, s
   return w;
 }
 
-void Participant::create_reader(Topic* topic, const DataReaderQos& qos, std::shared_ptr<EndpointEvents> events) {
+void Participant::create_reader(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
+                                std::shared_ptr<EndpointEvents> events) {
+  DataReaderQos qos = subscriber_->get_default_datareader_qos();
+  if (subscriber_->get_datareader_qos_from_profile(topic->get_name(), qos) != ReturnCode_t::RETCODE_OK)
+    qos = reader_qos(delivery, subscriber_->get_default_datareader_qos());
   events->topic = topic->get_name();
   events->mismatch_counter = &qos_mismatches_;
   auto listener = std::make_unique<ReaderEvents>(events);

@@ -1,6 +1,7 @@
 #include "bsn/dds/topics.hpp"
 
 #include <fastdds/dds/core/policy/QosPolicies.hpp>
+#include <utility>
 
 namespace bsn::dds {
 
@@ -45,9 +46,8 @@ Delivery delivery(TopicQos kind) {
 
 }  // namespace
 
-DataWriterQos writer_qos(TopicQos kind) {
+DataWriterQos writer_qos(TopicQos kind, DataWriterQos q) {
   const Delivery d = delivery(kind);
-  DataWriterQos q = DATAWRITER_QOS_DEFAULT;
   q.reliability().kind = d.reliability;
   q.durability().kind = d.durability;
   q.history().kind = KEEP_LAST_HISTORY_QOS;
@@ -58,9 +58,8 @@ DataWriterQos writer_qos(TopicQos kind) {
   return q;
 }
 
-DataReaderQos reader_qos(TopicQos kind) {
+DataReaderQos reader_qos(TopicQos kind, DataReaderQos q) {
   const Delivery d = delivery(kind);
-  DataReaderQos q = DATAREADER_QOS_DEFAULT;
   // A best-effort reader matches writers of either kind; only latched and command topics need reliability.
   q.reliability().kind = (kind == TopicQos::kLatched || kind == TopicQos::kCommand) ? RELIABLE_RELIABILITY_QOS
                                                                                     : BEST_EFFORT_RELIABILITY_QOS;
@@ -72,28 +71,20 @@ DataReaderQos reader_qos(TopicQos kind) {
 }
 
 const char* qos_policy_name(unsigned id) {
-  switch (id) {
-    case DURABILITY_QOS_POLICY_ID:
-      return "DURABILITY";
-    case DEADLINE_QOS_POLICY_ID:
-      return "DEADLINE";
-    case LATENCYBUDGET_QOS_POLICY_ID:
-      return "LATENCY_BUDGET";
-    case OWNERSHIP_QOS_POLICY_ID:
-      return "OWNERSHIP";
-    case LIVELINESS_QOS_POLICY_ID:
-      return "LIVELINESS";
-    case RELIABILITY_QOS_POLICY_ID:
-      return "RELIABILITY";
-    case DESTINATIONORDER_QOS_POLICY_ID:
-      return "DESTINATION_ORDER";
-    case PRESENTATION_QOS_POLICY_ID:
-      return "PRESENTATION";
-    case DATAREPRESENTATION_QOS_POLICY_ID:
-      return "DATA_REPRESENTATION";
-    default:
-      return "policy";
-  }
+  // The policies whose mismatch stops two endpoints from matching.
+  static constexpr std::pair<QosPolicyId_t, const char*> kNames[] = {
+      {DURABILITY_QOS_POLICY_ID, "DURABILITY"},
+      {DEADLINE_QOS_POLICY_ID, "DEADLINE"},
+      {LATENCYBUDGET_QOS_POLICY_ID, "LATENCY_BUDGET"},
+      {OWNERSHIP_QOS_POLICY_ID, "OWNERSHIP"},
+      {LIVELINESS_QOS_POLICY_ID, "LIVELINESS"},
+      {RELIABILITY_QOS_POLICY_ID, "RELIABILITY"},
+      {DESTINATIONORDER_QOS_POLICY_ID, "DESTINATION_ORDER"},
+      {PRESENTATION_QOS_POLICY_ID, "PRESENTATION"},
+      {DATAREPRESENTATION_QOS_POLICY_ID, "DATA_REPRESENTATION"}};
+  for (const auto& [policy, name] : kNames)
+    if (policy == id) return name;
+  return "policy";
 }
 
 }  // namespace bsn::dds

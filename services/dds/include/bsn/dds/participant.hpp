@@ -18,41 +18,13 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "bsn/dds/topics.hpp"
-#include "bsn_idl/bsnPubSubTypes.h"
 
 namespace bsn::dds {
-
-/// The generated type support of each bsn IDL type.
-template <class T>
-struct DdsType;
-template <>
-struct DdsType<bsn::RawSample> {
-  using PubSub = bsn::RawSamplePubSubType;
-};
-template <>
-struct DdsType<bsn::Orientation> {
-  using PubSub = bsn::OrientationPubSubType;
-};
-template <>
-struct DdsType<bsn::JointAngles> {
-  using PubSub = bsn::JointAnglesPubSubType;
-};
-template <>
-struct DdsType<bsn::Status> {
-  using PubSub = bsn::StatusPubSubType;
-};
-template <>
-struct DdsType<bsn::CalibrationRequest> {
-  using PubSub = bsn::CalibrationRequestPubSubType;
-};
-template <>
-struct DdsType<bsn::CalibrationResult> {
-  using PubSub = bsn::CalibrationResultPubSubType;
-};
 
 /// Counts matches and incompatible-QoS events of one endpoint and logs them; for a reader it also holds the
 /// data callback, which the Reader clears (under the mutex) when it is destroyed.
@@ -111,28 +83,32 @@ class Participant {
   Participant(const Participant&) = delete;
   Participant& operator=(const Participant&) = delete;
 
-  template <class T>
-  std::unique_ptr<Writer<T>> make_writer(const std::string& topic_name, TopicQos qos) {
+  /// A writer on `topic`, delivered as the topic says or as `delivery`. A data_writer profile named after the
+  /// topic in the XML profiles file replaces bsn's delivery settings for it.
+  template <class PubSub>
+  std::unique_ptr<Writer<typename PubSub::type>> make_writer(const Topic<PubSub>& topic,
+                                                             std::optional<TopicQos> delivery = {}) {
     auto events = std::make_shared<EndpointEvents>();
-    auto* w = create_writer(topic<T>(topic_name), writer_qos(qos), events);
-    return std::make_unique<Writer<T>>(w, events);
+    auto* w = create_writer(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events);
+    return std::make_unique<Writer<typename PubSub::type>>(w, events);
   }
 
-  template <class T>
-  std::unique_ptr<Reader<T>> make_reader(
-      const std::string& topic_name, TopicQos qos,
-      std::function<void(const T&, const eprosima::fastdds::dds::SampleInfo&)> on_sample) {
+  /// A reader on `topic` (delivery and XML profile as for writers) that calls `on_sample` for every valid sample.
+  template <class PubSub>
+  std::unique_ptr<Reader<typename PubSub::type>> make_reader(
+      const Topic<PubSub>& topic,
+      std::function<void(const typename PubSub::type&, const eprosima::fastdds::dds::SampleInfo&)> on_sample,
+      std::optional<TopicQos> delivery = {}) {
     auto events = std::make_shared<EndpointEvents>();
-    auto take_all = [cb = std::move(on_sample)](eprosima::fastdds::dds::DataReader* reader) {
-      T sample;
+    events->on_data = [cb = std::move(on_sample)](eprosima::fastdds::dds::DataReader* reader) {
+      typename PubSub::type sample;
       eprosima::fastdds::dds::SampleInfo info;
       while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
         if (info.valid_data) cb(sample, info);
       }
     };
-    events->on_data = std::move(take_all);
-    create_reader(topic<T>(topic_name), reader_qos(qos), events);
-    return std::make_unique<Reader<T>>(events);
+    create_reader(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events);
+    return std::make_unique<Reader<typename PubSub::type>>(events);
   }
 
   /// Incompatible-QoS events seen by any endpoint of this participant.
@@ -141,19 +117,17 @@ class Participant {
   eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
 
  private:
-  template <class T>
-  eprosima::fastdds::dds::Topic* topic(const std::string& name) {
-    eprosima::fastdds::dds::TypeSupport type(new typename DdsType<T>::PubSub());
+  template <class PubSub>
+  eprosima::fastdds::dds::Topic* dds_topic(const std::string& name) {
+    eprosima::fastdds::dds::TypeSupport type(new PubSub());
     return find_or_create_topic(name, type);
   }
 
   eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& name,
                                                       eprosima::fastdds::dds::TypeSupport type);
-  eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic,
-                                                    const eprosima::fastdds::dds::DataWriterQos& qos,
+  eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
                                                     std::shared_ptr<EndpointEvents> events);
-  void create_reader(eprosima::fastdds::dds::Topic* topic, const eprosima::fastdds::dds::DataReaderQos& qos,
-                     std::shared_ptr<EndpointEvents> events);
+  void create_reader(eprosima::fastdds::dds::Topic* topic, TopicQos delivery, std::shared_ptr<EndpointEvents> events);
 
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;

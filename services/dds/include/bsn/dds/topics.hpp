@@ -1,19 +1,16 @@
-// Topic names and the QoS of each (design.md section 3). Writers and readers of bsn processes take their QoS
-// from here so that they always match.
+// Every bsn topic, declared once (design.md section 3): its name, its IDL type (through the type support that
+// fastddsgen generates for it) and how it is delivered. Writers and readers take all three from here, so they
+// always match; `bsn echo` (and recorders and bridges) iterate kAllTopics. Adding a topic is one constant and its
+// entry in kAllTopics. bsn/calibration/progress gets its entry together with its IDL type.
 #pragma once
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <tuple>
+
+#include "bsn_idl/bsnPubSubTypes.h"
 
 namespace bsn::dds {
-
-inline constexpr const char* kRawTopic = "bsn/raw";
-inline constexpr const char* kOrientationTopic = "bsn/orientation";
-inline constexpr const char* kJointAnglesTopic = "bsn/joint_angles";
-inline constexpr const char* kStatusTopic = "bsn/status";
-inline constexpr const char* kCalibrationRequestTopic = "bsn/calibration/request";
-inline constexpr const char* kCalibrationResultTopic = "bsn/calibration/result";
-inline constexpr const char* kTruthOrientationTopic = "bsn/truth/orientation";
 
 /// How a topic is delivered.
 enum class TopicQos {
@@ -24,11 +21,45 @@ enum class TopicQos {
   kCommand,             ///< RELIABLE, VOLATILE, KEEP_LAST 16 (calibration requests)
 };
 
-eprosima::fastdds::dds::DataWriterQos writer_qos(TopicQos kind);
+/// A topic whose samples are `PubSub::type` (e.g. bsn::RawSample for bsn::RawSamplePubSubType).
+template <class PubSub>
+struct Topic {
+  using Type = typename PubSub::type;
+  const char* name;
+  TopicQos qos;
+};
 
-/// Reader QoS that matches the writer of `kind`. Readers keep a deeper history than writers so that a burst
-/// of samples of one instance between two takes is not overwritten.
-eprosima::fastdds::dds::DataReaderQos reader_qos(TopicQos kind);
+inline constexpr Topic<bsn::RawSamplePubSubType> kRawTopic{"bsn/raw", TopicQos::kSensorData};
+inline constexpr Topic<bsn::OrientationPubSubType> kOrientationTopic{"bsn/orientation", TopicQos::kEstimate};
+inline constexpr Topic<bsn::JointAnglesPubSubType> kJointAnglesTopic{"bsn/joint_angles", TopicQos::kEstimate};
+inline constexpr Topic<bsn::StatusPubSubType> kStatusTopic{"bsn/status", TopicQos::kLatched};
+inline constexpr Topic<bsn::OrientationPubSubType> kTruthOrientationTopic{"bsn/truth/orientation", TopicQos::kEstimate};
+inline constexpr Topic<bsn::CalibrationRequestPubSubType> kCalibrationRequestTopic{"bsn/calibration/request",
+                                                                                   TopicQos::kCommand};
+inline constexpr Topic<bsn::CalibrationResultPubSubType> kCalibrationResultTopic{"bsn/calibration/result",
+                                                                                 TopicQos::kLatched};
+
+inline constexpr std::tuple kAllTopics{kRawTopic,
+                                       kOrientationTopic,
+                                       kJointAnglesTopic,
+                                       kStatusTopic,
+                                       kTruthOrientationTopic,
+                                       kCalibrationRequestTopic,
+                                       kCalibrationResultTopic};
+
+/// Calls `f(topic)` for every topic of kAllTopics, in order.
+template <class F>
+void for_each_topic(F&& f) {
+  std::apply([&f](const auto&... topic) { (f(topic), ...); }, kAllTopics);
+}
+
+/// bsn's delivery of `kind` on top of `base` (the publisher's default, so an XML default profile's other
+/// policies stay).
+eprosima::fastdds::dds::DataWriterQos writer_qos(TopicQos kind, eprosima::fastdds::dds::DataWriterQos base);
+
+/// Reader QoS that matches the writer of `kind`, on top of `base`. Readers keep a deeper history than writers so
+/// that a burst of samples of one instance between two takes is not overwritten.
+eprosima::fastdds::dds::DataReaderQos reader_qos(TopicQos kind, eprosima::fastdds::dds::DataReaderQos base);
 
 /// Human-readable name of a QoS policy id, for incompatible-QoS reports.
 const char* qos_policy_name(unsigned policy_id);

@@ -1,0 +1,121 @@
+#include "command.hpp"
+
+#include <algorithm>
+#include <cstdio>
+
+#include "bsn/dds/log.hpp"
+#include "bsn/dds/shutdown.hpp"
+
+namespace bsn::services {
+namespace {
+
+std::vector<std::string> option_names(const CLI::App& app) {
+  std::vector<std::string> names;
+  for (const CLI::Option* o : app.get_options()) {
+    for (const std::string& n : o->get_lnames()) names.push_back("--" + n);
+    for (const std::string& n : o->get_snames()) names.push_back("-" + n);
+  }
+  return names;
+}
+
+// CLI11's message, and for the first argument nobody took that looks like a typo, the name it was meant to be.
+// CLI11 reports an unknown command as "A subcommand is required", so that case gets its own message.
+void print_usage_error(CLI::App& app, const CLI::ParseError& error, std::span<const Command> commands) {
+  const std::vector<CLI::App*> chosen = app.get_subcommands();
+  std::string message = error.what();
+  for (const std::string& arg : app.remaining(true)) {
+    const bool is_option = arg.starts_with('-');
+    if (!is_option && !chosen.empty()) continue;
+    std::vector<std::string> candidates;
+    if (is_option) {
+      candidates = option_names(chosen.empty() ? app : *chosen.front());
+    } else {
+      for (const Command& c : commands) candidates.push_back(c.name);
+    }
+    const std::string word = arg.substr(0, arg.find('='));
+    const std::string near = nearest_name(word, candidates);
+    if (!is_option) message = "unknown command '" + word + "'";
+    if (!near.empty()) message += "; did you mean '" + near + "'?";
+    if (!near.empty() || !is_option) break;
+  }
+  std::fprintf(stderr, "bsn: %s\nRun with --help for more information.\n", message.c_str());
+}
+
+}  // namespace
+
+int run_cli(int argc, char** argv, std::span<const Command> commands) {
+  CLI::App app{"bsn: inertial motion tracking on a body sensor network over DDS"};
+  app.set_version_flag("--version", "bsn 0.1.0");
+  app.require_subcommand(1);
+  std::vector<std::pair<CLI::App*, std::function<int()>>> runs;
+  for (const Command& c : commands) {
+    CLI::App* sub = app.add_subcommand(c.name, c.description);
+    runs.emplace_back(sub, c.add_options(sub));
+  }
+  try {
+    app.parse(argc, argv);
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      if (!*runs[i].first) continue;
+      dds::set_log_identity(commands[i].name);
+      return runs[i].second();
+    }
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == static_cast<int>(CLI::ExitCodes::Success)) return app.exit(e);  // --help, --version
+    print_usage_error(app, e, commands);
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bsn: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
+
+void add_domain_option(CLI::App* command, int& domain) {
+  domain = dds::default_domain();
+  command->add_option("--domain", domain, "DDS domain id, 0..232 (default: $BSN_DOMAIN or 0)")
+      ->check(CLI::Range(0, 232));
+}
+
+DdsCommandFrame::Handlers::Handlers() { dds::install_shutdown_handlers(); }
+
+DdsCommandFrame::DdsCommandFrame(int domain, const std::string& participant_name)
+    : participant_({domain, participant_name}) {}
+
+int DdsCommandFrame::run_ticks(std::chrono::milliseconds period, const std::function<std::optional<int>()>& tick) {
+  while (dds::sleep_unless_shutdown(period)) {
+    if (const std::optional<int> code = tick()) return *code;
+  }
+  return 0;
+}
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  // d[i][j]: distance between the first i characters of a and the first j of b.
+  std::vector<std::vector<std::size_t>> d(a.size() + 1, std::vector<std::size_t>(b.size() + 1));
+  for (std::size_t i = 0; i <= a.size(); ++i) d[i][0] = i;
+  for (std::size_t j = 0; j <= b.size(); ++j) d[0][j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      d[i][j] = std::min({d[i - 1][j] + 1, d[i][j - 1] + 1, d[i - 1][j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1])
+        d[i][j] = std::min(d[i][j], d[i - 2][j - 2] + 1);
+    }
+  }
+  return d[a.size()][b.size()];
+}
+
+std::string nearest_name(std::string_view word, const std::vector<std::string>& candidates) {
+  // Close enough: about one edit per three letters (leading dashes of options do not count), and not all of them.
+  const std::size_t letters = word.size() - std::min(word.find_first_not_of('-'), word.size());
+  const std::size_t limit = std::min(std::max<std::size_t>(1, (letters + 1) / 3), letters == 0 ? 0 : letters - 1);
+  std::string best;
+  std::size_t best_distance = limit + 1;
+  for (const std::string& c : candidates) {
+    if (const std::size_t d = edit_distance(word, c); d < best_distance) {
+      best = c;
+      best_distance = d;
+    }
+  }
+  return best;
+}
+
+}  // namespace bsn::services

@@ -1,0 +1,59 @@
+// The frame of `bsn`: each subcommand registers itself as a Command next to its run function, main() lists them,
+// and run_cli parses and dispatches. Long-running DDS commands run inside a DdsCommandFrame.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <functional>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "bsn/dds/participant.hpp"
+
+namespace bsn::services {
+
+/// One `bsn` subcommand. `add_options` declares its options on the CLI11 subcommand (bound to storage that the
+/// returned function owns) and returns what runs it once the command line is parsed: the process exit code.
+struct Command {
+  std::string name;
+  std::string description;
+  std::function<std::function<int()>(CLI::App*)> add_options;
+};
+
+/// Parses the command line and runs the chosen command. A usage error prints CLI11's message (for a mistyped
+/// command or option with "did you mean ...?") and returns 2; an exception from the command prints it and
+/// returns 1.
+int run_cli(int argc, char** argv, std::span<const Command> commands);
+
+/// Adds --domain (default: $BSN_DOMAIN or 0) to a DDS command.
+void add_domain_option(CLI::App* command, int& domain);
+
+/// What every long-running DDS command (fusion, echo, sim) runs in: SIGINT/SIGTERM handlers and the process's
+/// one participant from construction, the periodic tick loop in run_ticks(). Endpoints made from participant()
+/// are declared after the frame, so they close before the participant does.
+class DdsCommandFrame {
+ public:
+  DdsCommandFrame(int domain, const std::string& participant_name);
+  dds::Participant& participant() { return participant_; }
+
+  /// Calls `tick` every `period` until SIGINT, SIGTERM or dds::request_shutdown (-> 0) or until `tick` returns
+  /// an exit code (-> that code).
+  int run_ticks(std::chrono::milliseconds period, const std::function<std::optional<int>()>& tick);
+
+ private:
+  struct Handlers {
+    Handlers();
+  } handlers_;  // first, so that a signal while the participant starts is not lost
+  dds::Participant participant_;
+};
+
+/// Optimal string alignment distance: insertions, deletions, substitutions and swaps of neighbours count one.
+std::size_t edit_distance(std::string_view a, std::string_view b);
+
+/// The candidate nearest to `word` by edit_distance if it is close enough to be a typo of it, else "".
+std::string nearest_name(std::string_view word, const std::vector<std::string>& candidates);
+
+}  // namespace bsn::services
