@@ -10,9 +10,9 @@
 #include <limits>
 
 #include "bsn/dds/conversions.hpp"
-#include "bsn/dds/log.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/io/recording.hpp"
+#include "bsn/logging/log.hpp"
 #include "bsn/sim/scenario_file.hpp"
 
 namespace bsn::sim {
@@ -62,7 +62,7 @@ int write_scenario_files(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   for (std::size_t j = 0; j < recs.size(); ++j) {
     const std::string path = (std::filesystem::path(opt.out_dir) / (runner.segment_names()[j] + ".hdf5")).string();
     io::write_broad_hdf5(path, recs[j]);
-    dds::log_info("wrote ", path, " (", n, " samples at ", spec.rate_hz, " Hz)");
+    logging::log_info("wrote ", path, " (", n, " samples at ", spec.rate_hz, " Hz)");
   }
   return 0;
 }
@@ -75,8 +75,8 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   services::DdsCommandFrame frame(opt.domain, "bsn sim " + opt.node);
   auto raw_writer = frame.participant().make_writer(dds::kRawTopic);
   auto truth_writer = frame.participant().make_writer(dds::kTruthOrientationTopic);
-  dds::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
-                spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain);
+  logging::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
+                    spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain);
   bsn::RawSample raw;
   raw.node_id(opt.node);
   bsn::Orientation truth;
@@ -103,22 +103,22 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
     dds::fill_orientation(s.truth, truth);
     truth_writer->write(truth);
   }
-  if (write_failures > 0) dds::log_warn(write_failures, " raw samples could not be written");
-  dds::log_info("node '", opt.node, "' stopped (", dropped, " samples dropped by the sensor model)");
+  if (write_failures > 0) logging::log_warn(write_failures, " raw samples could not be written");
+  logging::log_info("node '", opt.node, "' stopped (", dropped, " samples dropped by the sensor model)");
   return 0;
 }
 
 int run_scenario(const SimNodeOptions& opt) {
   if (opt.rate_given) {
-    dds::log_error("--rate does not apply with --scenario: the scenario's rate_hz sets the rate");
+    logging::log_error("--rate does not apply with --scenario: the scenario's rate_hz sets the rate");
     return 2;
   }
   if (!(opt.speed > 0.0 && opt.speed <= 1e6)) {
-    dds::log_error("--speed must be in (0, 1e6]");
+    logging::log_error("--speed must be in (0, 1e6]");
     return 2;
   }
   if (opt.out_dir.empty() && (opt.node.empty() || opt.node.size() > 63)) {
-    dds::log_error("--scenario needs --node ID (1 to 63 characters) to publish, or --out DIR to write files");
+    logging::log_error("--scenario needs --node ID (1 to 63 characters) to publish, or --out DIR to write files");
     return 2;
   }
   try {
@@ -127,13 +127,13 @@ int run_scenario(const SimNodeOptions& opt) {
     if (opt.duration_s > 0.0) spec.duration_s = std::min(spec.duration_s, opt.duration_s);
     return opt.out_dir.empty() ? publish_scenario(spec, opt) : write_scenario_files(spec, opt);
   } catch (const ScenarioError& e) {
-    dds::log_error(e.what());
+    logging::log_error(e.what());
   } catch (const std::invalid_argument& e) {
-    dds::log_error(opt.scenario, ": ", e.what());
+    logging::log_error(opt.scenario, ": ", e.what());
   } catch (const io::IoError& e) {
-    dds::log_error(e.what());
+    logging::log_error(e.what());
   } catch (const std::filesystem::filesystem_error& e) {
-    dds::log_error(e.what());
+    logging::log_error(e.what());
   }
   return 2;
 }
@@ -143,15 +143,15 @@ int run_scenario(const SimNodeOptions& opt) {
 int run_sim_node(const SimNodeOptions& opt) {
   if (!opt.scenario.empty()) return run_scenario(opt);
   if (!opt.out_dir.empty() || opt.speed != 1.0) {
-    dds::log_error("--out and --speed need --scenario");
+    logging::log_error("--out and --speed need --scenario");
     return 2;
   }
   if (opt.node.empty() || opt.node.size() > 63) {
-    dds::log_error("--node must be 1 to 63 characters");
+    logging::log_error("--node must be 1 to 63 characters");
     return 2;
   }
   if (!(opt.rate_hz > 0.0 && opt.rate_hz <= 10000.0)) {
-    dds::log_error("--rate must be in (0, 10000] Hz");
+    logging::log_error("--rate must be in (0, 10000] Hz");
     return 2;
   }
   const std::string segment = opt.segment.empty() ? opt.node : opt.segment;
@@ -178,7 +178,7 @@ services::Command sim_command() {
             return [opt, cmd] {
               if (opt->scenario.empty() && opt->node.empty()) throw CLI::RequiredError("--node");
               opt->rate_given = cmd->count("--rate") > 0;
-              dds::set_log_identity("sim " + (opt->node.empty() ? std::string("scenario") : opt->node));
+              logging::set_log_identity("sim " + (opt->node.empty() ? std::string("scenario") : opt->node));
               return run_sim_node(*opt);
             };
           }};

@@ -10,7 +10,7 @@
 
 #include "bsn/calib/allan.hpp"
 #include "bsn/calib/pose_segmentation.hpp"
-#include "bsn/dds/calibration_file.hpp"
+#include "bsn/config/calibration_file.hpp"
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/io/recording.hpp"
 
@@ -145,8 +145,8 @@ int run_fit(const CalibrateOptions& opt) {
     std::ofstream out(out_path);
     out << "# bsn calibration of " << std::filesystem::path(opt.input).filename().string()
         << " (bsn calibrate): u = transform * (raw - bias)\n"
-        << dds::calibration_to_yaml(opt.node, &mag, opt.accelerometer ? &acc : nullptr,
-                                    opt.gyro_bias ? &gyro : nullptr);
+        << config::calibration_to_yaml(opt.node, &mag, opt.accelerometer ? &acc : nullptr,
+                                       opt.gyro_bias ? &gyro : nullptr);
     if (!out) {
       std::fprintf(stderr, "bsn calibrate: cannot write %s\n", out_path.c_str());
       return 2;

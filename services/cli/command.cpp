@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 
-#include "bsn/dds/log.hpp"
 #include "bsn/dds/shutdown.hpp"
+#include "bsn/logging/log.hpp"
 
 namespace bsn::services {
 namespace {
@@ -56,7 +56,7 @@ int run_cli(int argc, char** argv, std::span<const Command> commands) {
     app.parse(argc, argv);
     for (std::size_t i = 0; i < runs.size(); ++i) {
       if (!*runs[i].first) continue;
-      dds::set_log_identity(commands[i].name);
+      logging::set_log_identity(commands[i].name);
       return runs[i].second();
     }
   } catch (const CLI::ParseError& e) {

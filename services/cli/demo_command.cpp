@@ -11,11 +11,11 @@
 #include <numbers>
 #include <string>
 
-#include "bsn/dds/body_config.hpp"
+#include "bsn/config/body_config.hpp"
 #include "bsn/dds/child_process.hpp"
-#include "bsn/dds/log.hpp"
 #include "bsn/dds/participant.hpp"
 #include "bsn/dds/shutdown.hpp"
+#include "bsn/logging/log.hpp"
 #include "format.hpp"
 
 namespace bsn::services {
@@ -81,8 +81,8 @@ std::string render(DemoView& view, const std::vector<std::string>& joint_order, 
 int run_demo(const DemoOptions& opt) {
   fusion::BodyModel body;
   try {
-    body = opt.body_path.empty() ? fusion::default_lower_body() : dds::load_body_model(opt.body_path);
-  } catch (const dds::ConfigError& e) {
+    body = opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
+  } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "bsn demo: error: %s\n", e.what());
     return 2;
   }
@@ -96,7 +96,7 @@ int run_demo(const DemoOptions& opt) {
   }
   const std::filesystem::path dir = dir_template;
   const std::string body_file = (dir / "body.yaml").string();
-  std::ofstream(body_file) << dds::body_model_to_yaml(body);
+  std::ofstream(body_file) << config::body_model_to_yaml(body);
 
   const std::string self = dds::self_executable();
   const std::string domain = std::to_string(opt.domain);
@@ -135,7 +135,7 @@ int run_demo(const DemoOptions& opt) {
             (dir / ("sim-" + s.node + ".log")).string()));
       }
     } catch (const std::exception& e) {
-      dds::log_error("cannot start the demo processes: ", e.what());
+      logging::log_error("cannot start the demo processes: ", e.what());
       exit_code = 1;
     }
 
@@ -147,7 +147,7 @@ int run_demo(const DemoOptions& opt) {
       const double elapsed = std::chrono::duration<double>(now - start).count();
       if (opt.duration_s > 0.0 && elapsed >= opt.duration_s) break;
       if (!fusion_process->running()) {
-        dds::log_error("bsn fusion ended unexpectedly; see ", (dir / "fusion.log").string());
+        logging::log_error("bsn fusion ended unexpectedly; see ", (dir / "fusion.log").string());
         exit_code = 1;
         break;
       }
@@ -162,7 +162,7 @@ int run_demo(const DemoOptions& opt) {
     // Sensors first, so the fusion service sees them go before it stops itself.
     for (auto& s : sims) s->stop();
     if (fusion_process && fusion_process->stop() != std::optional<int>(0) && exit_code == 0) {
-      dds::log_error("bsn fusion did not stop cleanly; see ", (dir / "fusion.log").string());
+      logging::log_error("bsn fusion did not stop cleanly; see ", (dir / "fusion.log").string());
       exit_code = 1;
     }
   }
@@ -179,14 +179,14 @@ int run_demo(const DemoOptions& opt) {
   std::printf("bsn demo: %llu joint-angle samples from %zu of %zu joints\n", static_cast<unsigned long long>(total),
               joints_seen, joint_order.size());
   if (joints_seen < joint_order.size() && exit_code == 0) {
-    dds::log_error("some joints never produced angles; logs kept in ", dir.string());
+    logging::log_error("some joints never produced angles; logs kept in ", dir.string());
     exit_code = 1;
   }
   if (exit_code == 0) {
     std::error_code ec;
     std::filesystem::remove_all(dir, ec);
   } else {
-    dds::log_error("logs kept in ", dir.string());
+    logging::log_error("logs kept in ", dir.string());
   }
   return exit_code;
 }

@@ -3,9 +3,9 @@
 #include <cstdio>
 #include <string>
 
-#include "bsn/dds/body_config.hpp"
-#include "bsn/dds/calibration_file.hpp"
-#include "bsn/dds/log.hpp"
+#include "bsn/config/body_config.hpp"
+#include "bsn/config/calibration_file.hpp"
+#include "bsn/logging/log.hpp"
 #include "fusion_service.hpp"
 
 namespace bsn::services {
@@ -22,25 +22,25 @@ int run_fusion(const FusionCommandOptions& opt) {
   fusion::BodyModel body;
   FusionService::Options service_options = opt.service;
   try {
-    body = opt.body_path.empty() ? fusion::default_lower_body() : dds::load_body_model(opt.body_path);
-    service_options.calibrations = dds::load_body_calibrations(opt.body_path);
-  } catch (const dds::ConfigError& e) {
+    body = opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
+    service_options.calibrations = config::load_body_calibrations(opt.body_path);
+  } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "bsn fusion: error: %s\n", e.what());
     return 2;
   }
   if (opt.print_body) {
-    std::fputs(dds::body_model_to_yaml(body).c_str(), stdout);
+    std::fputs(config::body_model_to_yaml(body).c_str(), stdout);
     return 0;
   }
   DdsCommandFrame frame(opt.domain, "bsn fusion");
   FusionService service(frame.participant(), body, service_options);
-  dds::log_info("fusing ", body.segments.size(), " segments of '", body.name.empty() ? opt.body_path : body.name,
-                "' in domain ", opt.domain);
+  logging::log_info("fusing ", body.segments.size(), " segments of '", body.name.empty() ? opt.body_path : body.name,
+                    "' in domain ", opt.domain);
   const int exit_code = frame.run_ticks(std::chrono::milliseconds(20), [&service] {
     service.tick();
     return std::optional<int>();
   });
-  dds::log_info("stopped");
+  logging::log_info("stopped");
   return exit_code;
 }
 

@@ -5,7 +5,7 @@
 #include <chrono>
 
 #include "bsn/dds/conversions.hpp"
-#include "bsn/dds/log.hpp"
+#include "bsn/logging/log.hpp"
 
 namespace bsn::services {
 
@@ -51,15 +51,16 @@ void FusionService::on_raw(const bsn::RawSample& raw) {
   const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now);
   if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
     if (r.new_unknown_node)
-      dds::log_warn("samples from node '", raw.node_id(), "', which is on no segment of the body model; ignored");
+      logging::log_warn("samples from node '", raw.node_id(), "', which is on no segment of the body model; ignored");
     return;
   }
   const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
   if (r.node_fresh) {
-    dds::log_info("node '", spec.node, "' (", spec.name, ") is sending again");
+    logging::log_info("node '", spec.node, "' (", spec.name, ") is sending again");
     publish_status(now);
   }
-  if (r.clock_reset) dds::log_warn("node '", spec.node, "': its clock moved to a new time base; restarting its filter");
+  if (r.clock_reset)
+    logging::log_warn("node '", spec.node, "': its clock moved to a new time base; restarting its filter");
   if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
   publish_orientation(r, raw.timestamp_ns());
   if (r.joint) publish_joint(*r.joint, raw.timestamp_ns());
@@ -97,7 +98,7 @@ void FusionService::tick() {
   const auto turned_stale = fusion_.check_stale(now);
   for (const std::size_t i : turned_stale) {
     const fusion::SegmentSpec& spec = fusion_.body().segments[i];
-    if (fusion_.segment(i).last_arrival_ns) dds::log_warn("node '", spec.node, "' (", spec.name, ") is stale");
+    if (fusion_.segment(i).last_arrival_ns) logging::log_warn("node '", spec.node, "' (", spec.name, ") is stale");
   }
   if (!turned_stale.empty() || seconds(now - last_status_ns_) >= options_.status_period_s) publish_status(now);
 }

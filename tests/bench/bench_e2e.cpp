@@ -47,7 +47,7 @@
 #include <thread>
 #include <vector>
 
-#include "bsn/dds/body_config.hpp"
+#include "bsn/config/body_config.hpp"
 #include "bsn/dds/child_process.hpp"
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/participant.hpp"
@@ -709,7 +709,7 @@ class Bench {
       body.segments.push_back(std::move(s));
     }
     const std::string path = (dir_ / ("body-" + std::to_string(n) + ".yaml")).string();
-    std::ofstream(path) << dds::body_model_to_yaml(body);
+    std::ofstream(path) << bsn::config::body_model_to_yaml(body);
     return path;
   }
 

@@ -6,7 +6,7 @@
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <stdexcept>
 
-#include "bsn/dds/log.hpp"
+#include "bsn/logging/log.hpp"
 
 namespace bsn::dds {
 
@@ -24,9 +24,9 @@ class WriterEvents final : public DataWriterListener {
   }
   void on_offered_incompatible_qos(DataWriter*, const OfferedIncompatibleQosStatus& s) override {
     if (events_->mismatch_counter) ++*events_->mismatch_counter;
-    log_warn("topic ", events_->topic, ": a reader requests QoS this writer does not offer (",
-             qos_policy_name(s.last_policy_id), "); that reader receives nothing from us. bsn readers use ",
-             "BEST_EFFORT for streaming topics and match any writer.");
+    logging::log_warn("topic ", events_->topic, ": a reader requests QoS this writer does not offer (",
+                      qos_policy_name(s.last_policy_id), "); that reader receives nothing from us. bsn readers use ",
+                      "BEST_EFFORT for streaming topics and match any writer.");
   }
 
  private:
@@ -45,9 +45,9 @@ class ReaderEvents final : public DataReaderListener {
   }
   void on_requested_incompatible_qos(DataReader*, const RequestedIncompatibleQosStatus& s) override {
     if (events_->mismatch_counter) ++*events_->mismatch_counter;
-    log_warn("topic ", events_->topic, ": a writer offers QoS incompatible with this reader (",
-             qos_policy_name(s.last_policy_id), "); nothing from it will arrive. A BEST_EFFORT writer never ",
-             "matches a RELIABLE reader.");
+    logging::log_warn("topic ", events_->topic, ": a writer offers QoS incompatible with this reader (",
+                      qos_policy_name(s.last_policy_id), "); nothing from it will arrive. A BEST_EFFORT writer never ",
+                      "matches a RELIABLE reader.");
   }
 
  private:
@@ -81,7 +81,7 @@ int default_domain() {
     char* end = nullptr;
     const long v = std::strtol(env, &end, 10);
     if (end != env && *end == '\0' && v >= 0 && v <= 232) return static_cast<int>(v);
-    log_warn("BSN_DOMAIN='", env, "' is not a domain id in 0..232; using 0");
+    logging::log_warn("BSN_DOMAIN='", env, "' is not a domain id in 0..232; using 0");
   }
   return 0;
 }

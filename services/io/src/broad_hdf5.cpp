@@ -66,11 +66,20 @@ std::vector<std::uint8_t> read_flags(hid_t file, const std::string& path, const 
   return {raw.begin(), raw.end()};
 }
 
+// Datasets without modification times: the same recording always gives the same bytes, so outputs can be
+// compared with cmp and reruns are reproducible.
+hid_t untimed_dataset_properties() {
+  const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
+  if (dcpl >= 0) H5Pset_obj_track_times(dcpl, false);
+  return dcpl;
+}
+
 template <class Matrix>
 void write_matrix(hid_t file, const std::string& path, const char* name, const Matrix& m) {
   const hsize_t dims[2] = {static_cast<hsize_t>(m.rows()), static_cast<hsize_t>(m.cols())};
   Handle space(H5Screate_simple(2, dims, nullptr), H5Sclose);
-  Handle ds(H5Dcreate2(file, name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT), H5Dclose);
+  const Handle dcpl(untimed_dataset_properties(), H5Pclose);
+  Handle ds(H5Dcreate2(file, name, H5T_IEEE_F64LE, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT), H5Dclose);
   if (!ds.ok() || H5Dwrite(ds.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, m.data()) < 0) {
     throw IoError(path + ": cannot write dataset '" + name + "'");
   }
@@ -119,7 +128,8 @@ void write_broad_hdf5(const std::string& path, const Recording& rec) {
     H5Tenum_insert(type.get(), "TRUE", &t);
     const hsize_t n = rec.movement.size();
     Handle space(H5Screate_simple(1, &n, nullptr), H5Sclose);
-    Handle ds(H5Dcreate2(file.get(), "movement", type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT, H5P_DEFAULT),
+    const Handle dcpl(untimed_dataset_properties(), H5Pclose);
+    Handle ds(H5Dcreate2(file.get(), "movement", type.get(), space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
               H5Dclose);
     std::vector<std::int8_t> v(rec.movement.begin(), rec.movement.end());
     // HDF5 converts no integer to an enum, so the memory type is the enum itself (int8 = the values in v).

@@ -3,10 +3,10 @@
 #include <filesystem>
 #include <fstream>
 
-#include "bsn/dds/body_config.hpp"
-#include "bsn/dds/calibration_file.hpp"
+#include "bsn/config/body_config.hpp"
+#include "bsn/config/calibration_file.hpp"
 
-namespace bsn::dds {
+namespace bsn::config {
 namespace {
 
 namespace fs = std::filesystem;
@@ -125,4 +125,4 @@ TEST_F(TempDir, BodyKeyWithABadFileStopsAtTheSegmentsLine) {
 }
 
 }  // namespace
-}  // namespace bsn::dds
+}  // namespace bsn::config

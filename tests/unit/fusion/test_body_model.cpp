@@ -1,14 +1,14 @@
 // Body model rules and the YAML loader's messages: file, line and problem.
 #include <gtest/gtest.h>
 
-#include "bsn/dds/body_config.hpp"
+#include "bsn/config/body_config.hpp"
 #include "bsn/fusion/body_model.hpp"
 
 namespace bsn {
 namespace {
 
-using dds::ConfigError;
-using dds::parse_body_model;
+using config::ConfigError;
+using config::parse_body_model;
 
 // Parses and returns the error message, or "" if it parsed.
 std::string error_of(const std::string& yaml) {
@@ -61,7 +61,7 @@ segments:
 
 TEST(BodyModel, RoundTripsThroughYaml) {
   const auto body = fusion::default_lower_body();
-  const auto again = parse_body_model(dds::body_model_to_yaml(body), "generated");
+  const auto again = parse_body_model(config::body_model_to_yaml(body), "generated");
   ASSERT_EQ(again.segments.size(), body.segments.size());
   for (std::size_t i = 0; i < body.segments.size(); ++i) {
     EXPECT_EQ(again.segments[i].name, body.segments[i].name);
@@ -138,7 +138,7 @@ TEST(BodyModel, StructuralProblems) {
 
 TEST(BodyModel, MissingFileIsAConfigError) {
   try {
-    dds::load_body_model("/nonexistent/body.yaml");
+    config::load_body_model("/nonexistent/body.yaml");
     FAIL();
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("/nonexistent/body.yaml"), std::string::npos);

@@ -2,9 +2,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <thread>
 
 #include "bsn/io/recording.hpp"
 
@@ -49,6 +52,23 @@ TEST(BroadHdf5, RoundTripIsExact) {
   EXPECT_EQ(back.opt_quat, r.opt_quat);
   EXPECT_EQ(back.movement, r.movement);
   EXPECT_EQ(back.opt_pos.rows(), 0);
+}
+
+// The same recording written twice gives the same bytes (no modification times in the file), so simulator and
+// recorder outputs can be compared with cmp. HDF5 stores times in whole seconds: the writes are > 1 s apart.
+TEST(BroadHdf5, SameRecordingSameBytes) {
+  TempDir dir;
+  const Recording r = small_recording();
+  write_broad_hdf5(dir.file("first.hdf5"), r);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  write_broad_hdf5(dir.file("second.hdf5"), r);
+  const auto bytes = [](const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string first = bytes(dir.file("first.hdf5"));
+  ASSERT_FALSE(first.empty());
+  EXPECT_TRUE(first == bytes(dir.file("second.hdf5")));
 }
 
 TEST(BroadHdf5, SamplesCarryUniformTimeAndMissingMagnetometer) {

@@ -6,7 +6,7 @@
 
 #include "bsn/fusion/body_model.hpp"
 
-namespace bsn::dds {
+namespace bsn::config {
 
 /// A configuration error whose message names the file, the line and the problem.
 class ConfigError : public std::runtime_error {
@@ -23,4 +23,4 @@ fusion::BodyModel load_body_model(const std::string& path);
 /// The YAML text of a body model, in the format load_body_model reads.
 std::string body_model_to_yaml(const fusion::BodyModel& body);
 
-}  // namespace bsn::dds
+}  // namespace bsn::config

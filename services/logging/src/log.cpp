@@ -1,11 +1,11 @@
-#include "bsn/dds/log.hpp"
+#include "bsn/logging/log.hpp"
 
 #include <chrono>
 #include <cstdio>
 #include <ctime>
 #include <mutex>
 
-namespace bsn::dds {
+namespace bsn::logging {
 namespace {
 
 struct LogConfig {
@@ -56,4 +56,4 @@ void log_line(LogLevel level, std::string_view message) {
                level_name(level), static_cast<int>(message.size()), message.data());
 }
 
-}  // namespace bsn::dds
+}  // namespace bsn::logging

@@ -1,4 +1,4 @@
-#include "bsn/dds/body_config.hpp"
+#include "bsn/config/body_config.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -10,10 +10,10 @@
 #include <string_view>
 #include <vector>
 
+#include "bsn/config/calibration_file.hpp"
 #include "bsn/config/yaml_reader.hpp"
-#include "bsn/dds/calibration_file.hpp"
 
-namespace bsn::dds {
+namespace bsn::config {
 namespace {
 
 using fusion::BodyModel;
@@ -207,4 +207,4 @@ std::string body_model_to_yaml(const BodyModel& body) {
   return std::string(out.c_str()) + "\n";
 }
 
-}  // namespace bsn::dds
+}  // namespace bsn::config

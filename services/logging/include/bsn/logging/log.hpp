@@ -5,7 +5,7 @@
 #include <string>
 #include <string_view>
 
-namespace bsn::dds {
+namespace bsn::logging {
 
 enum class LogLevel { kDebug, kInfo, kWarn, kError };
 
@@ -34,4 +34,4 @@ void log_error(const Args&... args) {
   log(LogLevel::kError, args...);
 }
 
-}  // namespace bsn::dds
+}  // namespace bsn::logging

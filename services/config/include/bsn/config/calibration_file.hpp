@@ -17,9 +17,9 @@
 
 #include "bsn/calib/field_calibration.hpp"
 #include "bsn/calib/sensor_calibration.hpp"
-#include "bsn/dds/body_config.hpp"
+#include "bsn/config/body_config.hpp"
 
-namespace bsn::dds {
+namespace bsn::config {
 
 /// Parses calibration YAML; `source` names it in messages. Throws ConfigError("SOURCE:LINE: problem") on a
 /// syntax error, unknown key, wrong size, non-finite number or singular transform.
@@ -41,4 +41,4 @@ std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations
 /// `path` relative to the directory of `relative_to` (a file), unless it is absolute.
 std::string resolve_relative(const std::string& path, const std::string& relative_to);
 
-}  // namespace bsn::dds
+}  // namespace bsn::config

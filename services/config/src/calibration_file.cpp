@@ -1,4 +1,4 @@
-#include "bsn/dds/calibration_file.hpp"
+#include "bsn/config/calibration_file.hpp"
 
 #include <yaml-cpp/yaml.h>
 
@@ -10,7 +10,7 @@
 
 #include "bsn/config/yaml_reader.hpp"
 
-namespace bsn::dds {
+namespace bsn::config {
 namespace {
 
 using Reader = config::YamlReader<ConfigError>;
@@ -147,4 +147,4 @@ std::string resolve_relative(const std::string& path, const std::string& relativ
   return (std::filesystem::path(relative_to).parent_path() / p).lexically_normal().string();
 }
 
-}  // namespace bsn::dds
+}  // namespace bsn::config
