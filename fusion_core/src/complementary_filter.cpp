@@ -23,8 +23,6 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                            }),
                                            rest_param_fields<P>(), timing_param_fields<P>());
 
-std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
-
 // Gain of a first-order low-pass with time constant tau for a step dt: exact for any dt.
 double step_gain(double dt, double inv_tau) { return 1.0 - std::exp(-dt * inv_tau); }
 
@@ -47,42 +45,30 @@ double atan2_over_y(double y, double x) {
 
 }  // namespace
 
-ComplementaryFilter::ComplementaryFilter(const Params& params) : params_(params), rest_(params) {
+ComplementaryFilter::ComplementaryFilter(const Params& params)
+    : OrientationFilter(kName, params), params_(params), rest_(params) {
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
   require_positive(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
   require_positive(kName, params.mag_norm_tolerance, "mag_norm_tolerance");
   params.RestDetector::Params::check(kName);
-  params.FilterTimingParams::check(kName);
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
-  coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
 }
 
-UpdateResult ComplementaryFilter::initialise(const ImuSample& s) {
+UpdateResult ComplementaryFilter::start(const ImuSample& s) {
   // An orientation needs at least the direction of gravity. Any field not parallel to it gives a heading.
-  const std::optional<StartOrientation> start = start_orientation(s, 1e-6);
-  if (!start) return UpdateResult::kRejected;
-  const bool mag_usable = start->with_mag;
-  state_.q = start->q;
+  const std::optional<StartOrientation> initial = start_orientation(s, 1e-6);
+  if (!initial) return UpdateResult::kRejected;
+  const bool mag_usable = initial->with_mag;
+  state_.q = initial->q;
   state_.mag_ref_norm = mag_usable ? s.mag.norm() : 0.0;
-  state_.initialised = true;
-  state_.last_ns = s.timestamp_ns;
-  state_.init_ns = s.timestamp_ns;
   state_.flags = start_flags(s.has_mag && !mag_usable);
   rest_.reset();
   return UpdateResult::kInitialised;
 }
 
-UpdateResult ComplementaryFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
-
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
-  state_.last_ns = s.timestamp_ns;
+UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
   if (dt != state_.gain_dt_s) {  // dt is nearly always the same from sample to sample
     state_.gain_dt_s = dt;
@@ -130,7 +116,7 @@ UpdateResult ComplementaryFilter::update(const ImuSample& s) {
   state_.q.coeffs() = q.coeffs() * inverse_sqrt_near_one(q.coeffs().squaredNorm());
 
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }
 

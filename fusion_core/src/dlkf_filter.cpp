@@ -141,7 +141,8 @@ Quat DlkfFilter::triad(const Vec3& up, const Vec3& field) {
 }
 
 DlkfFilter::DlkfFilter(const Params& params)
-    : params_(params),
+    : OrientationFilter(kName, params),
+      params_(params),
       bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}),
       r_adaption_(params.thresholds()) {
   require_positive(kName, params.sigma_g, "sigma_g");
@@ -154,7 +155,6 @@ DlkfFilter::DlkfFilter(const Params& params)
   require_positive(kName, params.tau_mag_disturbance_s, "tau_mag_disturbance_s");
   if (!is_switch(params.gyro_bias_lowpass)) throw std::invalid_argument("dlkf: gyro_bias_lowpass must be 0 or 1");
   params.RAdaptionFilterParams::check(kName);
-  params.FilterTimingParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("dlkf: max_gap_s must be <= 60 s");
   params.RestDetector::Params::check(kName);
   coeff_.var_g = params.sigma_g * params.sigma_g;
@@ -167,14 +167,16 @@ DlkfFilter::DlkfFilter(const Params& params)
   const double acc_low = std::max(kGravity - params.acc_rejection_m_s2, 0.0);
   coeff_.acc_accept_min2 = acc_low * acc_low;
   coeff_.acc_accept_max2 = (kGravity + params.acc_rejection_m_s2) * (kGravity + params.acc_rejection_m_s2);
-  coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
   rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
-void DlkfFilter::reset() {
-  state_ = State{};
+void DlkfFilter::clear() {
+  restart_keeping_bias();
   bias_.reset();
+}
+
+void DlkfFilter::restart_keeping_bias() {
+  state_ = State{};
   r_adaption_.reset();
   rest_.reset();
 }
@@ -185,36 +187,26 @@ void DlkfFilter::initialise_magnetic(const Vec3& mag) {
   state_.mag_ref = MagneticRAdaption::Reference::of(mag, state_.gravity.vector().normalized());
 }
 
-UpdateResult DlkfFilter::initialise(const ImuSample& s) {
-  const std::optional<StartOrientation> start = start_orientation(s);
-  if (!start) return UpdateResult::kRejected;
-  const bool mag_usable = start->with_mag;
-  reset();
+UpdateResult DlkfFilter::start(const ImuSample& s) {
+  const std::optional<StartOrientation> initial = start_orientation(s);
+  if (!initial) return UpdateResult::kRejected;
+  const bool mag_usable = initial->with_mag;
+  restart_keeping_bias();  // the gap rule
   state_.gravity.initialise(s.acc, coeff_.var_a, coeff_.var_ext);
   if (mag_usable) {
     initialise_magnetic(s.mag);
   } else {
     // No heading reference yet: carry earth north (zero yaw) with the gyro until a magnetometer sample arrives.
-    state_.magnetic.initialise(start->q.conjugate() * Vec3::UnitY(), coeff_.var_m, coeff_.var_dist);
+    state_.magnetic.initialise(initial->q.conjugate() * Vec3::UnitY(), coeff_.var_m, coeff_.var_dist);
   }
   state_.q = triad(state_.gravity.vector(), state_.magnetic.vector());
   state_.gyr_prev = s.gyr;
   state_.have_gyr_prev = s.has_gyr;
-  state_.initialised = true;
-  state_.last_ns = s.timestamp_ns;
-  state_.init_ns = s.timestamp_ns;
   state_.flags = start_flags(s.has_mag && !mag_usable);
   return UpdateResult::kInitialised;
 }
 
-UpdateResult DlkfFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
-
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
-  state_.last_ns = s.timestamp_ns;
+UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
 
   if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
@@ -275,7 +267,7 @@ UpdateResult DlkfFilter::update(const ImuSample& s) {
   if (up.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad_from_unit_up(up, h);
 
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }
 

@@ -67,24 +67,22 @@ Mat34 rotate_to_sensor_jacobian(const Quat& q, const Vec3& v) {
 
 }  // namespace
 
-EkfFilter::EkfFilter(const Params& params) : params_(params), r_adaption_(params.thresholds()) {
+EkfFilter::EkfFilter(const Params& params)
+    : OrientationFilter(kName, params), params_(params), r_adaption_(params.thresholds()) {
   require_positive(kName, params.sigma_g, "sigma_g");
   require_positive(kName, params.sigma_bg, "sigma_bg");
   require_positive(kName, params.sigma_a, "sigma_a");
   require_positive(kName, params.sigma_m, "sigma_m");
   params.KalmanInitParams::check(kName);
   params.RAdaptionFilterParams::check(kName);
-  params.FilterTimingParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("ekf: max_gap_s must be <= 60 s");
   params.RestDetector::Params::check(kName);
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_m = params.sigma_m * params.sigma_m;
-  coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
   rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
-void EkfFilter::reset() {
+void EkfFilter::clear() {
   state_ = State{};
   r_adaption_.reset();
   rest_.reset();
@@ -102,25 +100,33 @@ void EkfFilter::set_reference(const Vec3& mag_earth) {
   state_.h_ref_judged = MagneticRAdaption::Reference::of(state_.h_ref, Vec3::UnitZ());
 }
 
-UpdateResult EkfFilter::initialise(const ImuSample& s) {
-  const std::optional<StartOrientation> start = start_orientation(s);
-  if (!start) return UpdateResult::kRejected;
-  const bool mag_usable = start->with_mag;
-  reset();
-  state_.q = start->q;
+UpdateResult EkfFilter::start(const ImuSample& s) {
+  const std::optional<StartOrientation> initial = start_orientation(s);
+  if (!initial) return UpdateResult::kRejected;
+  const bool mag_usable = initial->with_mag;
+  const bool restart = initialised();
+  const Vec3 bias = state_.bias;
+  const Mat3 bias_covariance = state_.p.bottomRightCorner<3, 3>();
+  clear();
+  state_.q = initial->q;
   if (mag_usable) set_reference(state_.q * s.mag);
   const Mat43 x = xi(state_.q);
   const Eigen::Vector4d qv = as_vector(state_.q);
   const double var_att = params_.init_attitude_sigma_rad * params_.init_attitude_sigma_rad;
   state_.p.setZero();
   state_.p.topLeftCorner<4, 4>() = 0.25 * var_att * x * x.transpose() + kNormDirectionVariance * qv * qv.transpose();
-  state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(params_.init_bias_sigma_rad_s *
-                                                            params_.init_bias_sigma_rad_s);
+  const double var_bias = params_.init_bias_sigma_rad_s * params_.init_bias_sigma_rad_s;
+  if (restart) {  // the gap rule: the bias and its covariance are kept
+    state_.bias = bias;
+    state_.p.bottomRightCorner<3, 3>() = bias_covariance;
+    const double gap_s = static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
+    kalman_support::grow_over_gap(state_.p.bottomRightCorner<3, 3>(), params_.sigma_bg * params_.sigma_bg, gap_s,
+                                  var_bias);
+  } else {
+    state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(var_bias);
+  }
   state_.gyr_prev = s.gyr;
   state_.have_gyr_prev = s.has_gyr;
-  state_.initialised = true;
-  state_.last_ns = s.timestamp_ns;
-  state_.init_ns = s.timestamp_ns;
   state_.flags = start_flags(s.has_mag && !mag_usable);
   return UpdateResult::kInitialised;
 }
@@ -148,14 +154,7 @@ void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen
   state_.q = n > 1e-9 ? Quat(q(0) * inv_n, q(1) * inv_n, q(2) * inv_n, q(3) * inv_n) : state_.q;
 }
 
-UpdateResult EkfFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
-
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
-  state_.last_ns = s.timestamp_ns;
+UpdateResult EkfFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
 
   // Prediction: q <- q (x) exp(w dt), b random walk; F and Q linearised at the new estimate. w is the mean of the
@@ -256,7 +255,7 @@ UpdateResult EkfFilter::update(const ImuSample& s) {
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
 
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }
 

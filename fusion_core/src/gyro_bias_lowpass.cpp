@@ -12,7 +12,7 @@ GyroBiasLowPass::GyroBiasLowPass(const Params& params) : params_(params) {
   require_positive("gyro bias low-pass", params.bias_omega_min_rad_s, "bias_omega_min_rad_s");
   require_positive("gyro bias low-pass", params.bias_min_static_s, "bias_min_static_s");
   omega_c_ = 2.0 * std::numbers::pi * params.bias_corner_frequency_hz;
-  min_static_ns_ = static_cast<std::uint64_t>(std::llround(params.bias_min_static_s * 1e9));
+  min_static_ns_ = seconds_to_ns(params.bias_min_static_s);
 }
 
 void GyroBiasLowPass::cache_gain(double dt) {

@@ -21,8 +21,6 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                            bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
                                            rest_param_fields<P>(), timing_param_fields<P>());
 
-std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
-
 void require_switch(std::string_view name, double value, const char* param) {
   if (value != 0.0 && value != 1.0) {
     throw std::invalid_argument(std::string(name) + ": parameter " + param + " must be 0 or 1, got " +
@@ -33,7 +31,6 @@ void require_switch(std::string_view name, double value, const char* param) {
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.gain, "gain");
   require_positive(name, p.initial_gain, "initial_gain");
-  p.FilterTimingParams::check(name);
   require_switch(name, p.gyro_bias_lowpass, "gyro_bias_lowpass");
   require_switch(name, p.mag_rejection, "mag_rejection");
   return p;
@@ -42,13 +39,12 @@ const P& checked(const P& p, std::string_view name) {
 }  // namespace
 
 IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
-    : params_(checked(params, use_magnetometer ? "iecf" : "iecf6")),
+    : OrientationFilter(use_magnetometer ? "iecf" : "iecf6", params),
+      params_(checked(params, use_magnetometer ? "iecf" : "iecf6")),
       use_magnetometer_(use_magnetometer),
       rest_(params),
       bias_(params),
       mag_detector_(params) {
-  coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
   // |gain e dt| <= gain (|e_a| + weight |e_m|) dt <= gain (dt + max_gap_s) <= 2 gain max_gap_s (unit crosses).
   coeff_.correction_bounded = 2.0 * std::max(params.gain, params.initial_gain) * params.max_gap_s < 1e149;
 }
@@ -59,25 +55,22 @@ double IecfFilter::gain_at(double since_init_s) const {
   return params_.initial_gain + (params_.gain - params_.initial_gain) * fraction;
 }
 
-void IecfFilter::reset() {
+void IecfFilter::clear() {
   state_ = State{};
   rest_.reset();
   bias_.reset();
   mag_detector_.reset();
 }
 
-UpdateResult IecfFilter::initialise(const ImuSample& s) {
+UpdateResult IecfFilter::start(const ImuSample& s) {
   // IECF6 too takes its initial heading from the magnetometer when there is one (Fan's IECF6 "with the
   // alignment of the initial yaw angle"); afterwards it never reads it again.
-  const std::optional<StartOrientation> start = start_orientation(s);
-  if (!start) return UpdateResult::kRejected;
-  const bool with_mag = start->with_mag;
-  state_.q = start->q;
-  state_.initialised = true;
+  const std::optional<StartOrientation> initial = start_orientation(s);
+  if (!initial) return UpdateResult::kRejected;
+  const bool with_mag = initial->with_mag;
+  state_.q = initial->q;
   state_.heading_known = with_mag;
-  state_.last_ns = s.timestamp_ns;
   state_.last_mag_ns = with_mag ? s.timestamp_ns : 0;
-  state_.init_ns = s.timestamp_ns;
   state_.flags = start_flags(use_magnetometer_ && s.has_mag && !with_mag);
   rest_.reset();
   mag_detector_.reset();
@@ -86,17 +79,11 @@ UpdateResult IecfFilter::initialise(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
-UpdateResult IecfFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);  // the bias estimate is kept
-
-  const std::uint64_t dt_ns = s.timestamp_ns - state_.last_ns;
-  const double dt = static_cast<double>(dt_ns) * 1e-9;
-  const std::uint64_t since_init_ns = s.timestamp_ns - state_.init_ns;
+UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
+  const std::uint64_t dt_ns = s.timestamp_ns - clock().last_ns;
+  const std::uint64_t since_init_ns = s.timestamp_ns - clock().init_ns;
   const double gain =
-      since_init_ns >= coeff_.init_period_ns ? params_.gain : gain_at(static_cast<double>(since_init_ns) * 1e-9);
+      since_init_ns >= init_period_ns() ? params_.gain : gain_at(static_cast<double>(since_init_ns) * 1e-9);
   const Vec3 rate = !s.has_gyr ? Vec3::Zero() : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
   const Vec3 gyro_step = rate * dt;
   // The step can only overflow (and the sample be rejected) for an absurd rate or gain: only then is the detector
@@ -130,8 +117,8 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
         // Weighted by the time since the last used reading, so the heading gain holds per second with a
         // magnetometer slower than the IMU (1 exactly when the last sample had one).
         const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
-        const double weight = (state_.last_mag_ns == 0 || since_mag > coeff_.max_gap_ns) ? 1.0
-                              : since_mag == dt_ns                                       ? 1.0
+        const double weight = (state_.last_mag_ns == 0 || since_mag > max_gap_ns()) ? 1.0
+                              : since_mag == dt_ns                                  ? 1.0
                                                    : static_cast<double>(since_mag) * 1e-9 / dt;
         error += weight * east_measured.cross(east_predicted);  // e_m (virtual east, section 2.1.2)
         mag_used = true;
@@ -149,7 +136,6 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   }
 
   state_.q = q;
-  state_.last_ns = s.timestamp_ns;
   if (mag_used) {
     state_.heading_known = true;
     state_.last_mag_ns = s.timestamp_ns;
@@ -158,7 +144,7 @@ UpdateResult IecfFilter::update(const ImuSample& s) {
   state_.flags.mag_rejected = mag_rejected;
   if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = since_init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = since_init_ns < init_period_ns();
   return UpdateResult::kUpdated;
 }
 

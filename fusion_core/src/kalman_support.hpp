@@ -11,7 +11,13 @@ namespace bsn::fusion::kalman_support {
 
 using Mat3 = Eigen::Matrix3d;
 
-inline std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
+/// The gap rule for a gyro-bias covariance block (the bias estimate is kept across a gap): the bias walked unobserved
+/// over the gap, so each variance grows by walk_var_per_s * gap_s, but by no more than init_var, the spread of a
+/// first start.
+template <class Block>
+void grow_over_gap(Block&& p_bias, double walk_var_per_s, double gap_s, double init_var) {
+  p_bias.diagonal().array() += std::min(walk_var_per_s * gap_s, init_var);
+}
 
 /// v / |v| as one division and a multiplication per component (Eigen's normalized() divides each component);
 /// the caller guarantees |v| > 0.

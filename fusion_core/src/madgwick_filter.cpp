@@ -17,11 +17,8 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                            }),
                                            bias_param_fields<P>(), rest_param_fields<P>(), timing_param_fields<P>());
 
-std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
-
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.beta, "beta");
-  p.FilterTimingParams::check(name);
   if (p.gyro_bias_lowpass != 0.0 && p.gyro_bias_lowpass != 1.0) {
     throw std::invalid_argument(std::string(name) + ": parameter gyro_bias_lowpass must be 0 or 1, got " +
                                 std::to_string(p.gyro_bias_lowpass));
@@ -31,12 +28,12 @@ const P& checked(const P& p, std::string_view name) {
 }  // namespace
 
 MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
-    : params_(checked(params, use_magnetometer ? "madgwick" : "madgwick6")),
+    : OrientationFilter(use_magnetometer ? "madgwick" : "madgwick6", params),
+      params_(checked(params, use_magnetometer ? "madgwick" : "madgwick6")),
       use_magnetometer_(use_magnetometer),
       rest_(params),
       bias_(params) {
-  coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
+  coeff_.bias_lowpass = params.gyro_bias_lowpass != 0.0;
 }
 
 // R(q)^T d for a unit q = (w, x, y, z) in the paper's form (diagonal terms 1 - 2(..)), and its Jacobian as the
@@ -77,22 +74,19 @@ Eigen::Vector4d MadgwickFilter::gradient(const Quat& q, const Vec3& acc_unit, co
   return grad;
 }
 
-void MadgwickFilter::reset() {
+void MadgwickFilter::clear() {
   state_ = State{};
   rest_.reset();
   bias_.reset();
 }
 
-UpdateResult MadgwickFilter::initialise(const ImuSample& s) {
+UpdateResult MadgwickFilter::start(const ImuSample& s) {
   // The 6D variant too takes its initial heading from the magnetometer when there is one (an absolute start,
   // as Fan's IECF6 with its initial yaw aligned); afterwards it never reads it again.
-  const std::optional<StartOrientation> start = start_orientation(s);
-  if (!start) return UpdateResult::kRejected;
-  const bool with_mag = start->with_mag;
-  state_.q = start->q;
-  state_.initialised = true;
-  state_.last_ns = s.timestamp_ns;
-  state_.init_ns = s.timestamp_ns;
+  const std::optional<StartOrientation> initial = start_orientation(s);
+  if (!initial) return UpdateResult::kRejected;
+  const bool with_mag = initial->with_mag;
+  state_.q = initial->q;
   state_.flags = start_flags(use_magnetometer_ && s.has_mag && !with_mag);
   state_.held_mag = with_mag && use_magnetometer_ ? s.mag : Vec3::Zero();
   state_.held_mag_ns = with_mag && use_magnetometer_ ? s.timestamp_ns : 0;
@@ -101,22 +95,16 @@ UpdateResult MadgwickFilter::initialise(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
-UpdateResult MadgwickFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
-
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
   Quat q = state_.q;
   // A held reading is used by a sample without magnetometer within max_gap_s of the last usable one.
-  const bool hold = use_magnetometer_ && !s.has_mag && state_.held_mag_ns != 0 &&
-                    s.timestamp_ns - state_.held_mag_ns <= coeff_.max_gap_ns;
+  const bool hold =
+      use_magnetometer_ && !s.has_mag && state_.held_mag_ns != 0 && s.timestamp_ns - state_.held_mag_ns <= max_gap_ns();
   Vec3 held_mag = state_.held_mag;
   // Gyro part, integrated exactly for a rate constant over the step (the paper's Euler step of
   // q_dot = q (x) (0, w) / 2 is its first-order approximation).
   if (s.has_gyr) {
-    const Vec3 rate = params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
+    const Vec3 rate = coeff_.bias_lowpass ? Vec3(s.gyr - bias_.bias()) : s.gyr;
     const Quat increment = exp_rotation_vector(rate * dt);
     q = q * increment;
     if (hold) held_mag = rotate(increment.conjugate(), held_mag);  // a fixed earth vector, turned sensor
@@ -196,12 +184,11 @@ UpdateResult MadgwickFilter::update(const ImuSample& s) {
   state_.held_mag = held_mag;
   if (with_mag) state_.held_mag_ns = s.timestamp_ns;
   if (use_magnetometer_ && s.has_mag && !with_mag) state_.held_mag_ns = 0;  // a bad reading ends the hold
-  state_.last_ns = s.timestamp_ns;
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
-  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
+  if (s.has_gyr && coeff_.bias_lowpass) bias_.update(s.timestamp_ns, dt, s.gyr);
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }
 

@@ -20,7 +20,7 @@ MagDisturbanceDetector::MagDisturbanceDetector(const Params& params) : params_(p
                                 ": a leave threshold must not exceed its enter threshold (mag_norm_leave <= "
                                 "mag_norm_enter, mag_dip_leave_rad <= mag_dip_enter_rad)");
   }
-  min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.mag_min_clean_s * 1e9));
+  min_clean_ns_ = seconds_to_ns(params.mag_min_clean_s);
 }
 
 double MagDisturbanceDetector::dip_angle(const Vec3& m, const Vec3& up) {

@@ -136,7 +136,10 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg) {
 }  // namespace mekf
 
 MekfFilter::MekfFilter(const Params& params, bool adaptive)
-    : params_(params), adaptive_(adaptive), r_adaption_(params.thresholds()) {
+    : OrientationFilter(adaptive ? "mekf_adaptive" : "mekf", params),
+      params_(params),
+      adaptive_(adaptive),
+      r_adaption_(params.thresholds()) {
   const std::string_view n = adaptive ? "mekf_adaptive" : "mekf";
   coeff_.start_intensity = preset_index(n, params.preset);
   coeff_.noise = kNezTable3[static_cast<std::size_t>(coeff_.start_intensity)];
@@ -155,7 +158,6 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   }
   params.KalmanInitParams::check(n);
   params.RAdaptionFilterParams::check(n);
-  params.FilterTimingParams::check(n);
   params.RestDetector::Params::check(n);
   require_positive(n, params.static_gyr_rad_s, "static_gyr_rad_s");
   require_positive(n, params.static_acc_m_s2, "static_acc_m_s2");
@@ -172,17 +174,15 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
     throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
   }
   if (params.max_gap_s > 60.0) throw std::invalid_argument(std::string(n) + ": max_gap_s must be <= 60 s");
-  coeff_.max_gap_ns = kalman_support::seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = kalman_support::seconds_to_ns(params.init_period_s);
-  coeff_.intensity_hold_ns = kalman_support::seconds_to_ns(params.intensity_hold_s);
-  coeff_.min_switch_interval_ns = kalman_support::seconds_to_ns(params.min_switch_interval_s);
-  coeff_.switch_confirm_ns = kalman_support::seconds_to_ns(params.switch_confirm_s);
+  coeff_.intensity_hold_ns = seconds_to_ns(params.intensity_hold_s);
+  coeff_.min_switch_interval_ns = seconds_to_ns(params.min_switch_interval_s);
+  coeff_.switch_confirm_ns = seconds_to_ns(params.switch_confirm_s);
   coeff_.bias_cap_time_s = std::max(params.min_switch_interval_s, 1.0);
-  reset();
+  clear();
   rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
-void MekfFilter::reset() {
+void MekfFilter::clear() {
   state_ = State{};
   state_.intensity = coeff_.start_intensity;
   r_adaption_.reset();
@@ -199,21 +199,29 @@ void MekfFilter::set_reference(const Vec3& mag_earth) {
   state_.h_ref_judged = MagneticRAdaption::Reference::of(state_.h_ref, Vec3::UnitZ());
 }
 
-UpdateResult MekfFilter::initialise(const ImuSample& s) {
-  const std::optional<StartOrientation> start = start_orientation(s);
-  if (!start) return UpdateResult::kRejected;
-  const bool mag_usable = start->with_mag;
-  reset();
-  state_.q = start->q;
+UpdateResult MekfFilter::start(const ImuSample& s) {
+  const std::optional<StartOrientation> initial = start_orientation(s);
+  if (!initial) return UpdateResult::kRejected;
+  const bool mag_usable = initial->with_mag;
+  const bool restart = initialised();
+  const Vec3 bias = state_.bias;
+  const Mat3 bias_covariance = state_.p.bottomRightCorner<3, 3>();
+  const double walk_var_per_s = noise().sigma_bg * noise().sigma_bg;  // of the set in use before the gap
+  clear();
+  state_.q = initial->q;
   if (mag_usable) set_reference(state_.q * s.mag);
   state_.p.setZero();
   state_.p.topLeftCorner<3, 3>().diagonal().setConstant(params_.init_attitude_sigma_rad *
                                                         params_.init_attitude_sigma_rad);
-  state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(params_.init_bias_sigma_rad_s *
-                                                            params_.init_bias_sigma_rad_s);
-  state_.initialised = true;
-  state_.last_ns = s.timestamp_ns;
-  state_.init_ns = s.timestamp_ns;
+  const double var_bias = params_.init_bias_sigma_rad_s * params_.init_bias_sigma_rad_s;
+  if (restart) {  // the gap rule: the bias and its covariance are kept
+    state_.bias = bias;
+    state_.p.bottomRightCorner<3, 3>() = bias_covariance;
+    const double gap_s = static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
+    kalman_support::grow_over_gap(state_.p.bottomRightCorner<3, 3>(), walk_var_per_s, gap_s, var_bias);
+  } else {
+    state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(var_bias);
+  }
   state_.last_switch_ns = s.timestamp_ns;
   state_.flags = start_flags(s.has_mag && !mag_usable);
   return UpdateResult::kInitialised;
@@ -347,14 +355,7 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
   state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
 }
 
-UpdateResult MekfFilter::update(const ImuSample& s) {
-  if (!s.finite()) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) return initialise(s);
-
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
-  state_.last_ns = s.timestamp_ns;
+UpdateResult MekfFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
   if (adaptive_) adapt(s);
   MekfNoise n = noise();
@@ -401,10 +402,16 @@ UpdateResult MekfFilter::update(const ImuSample& s) {
     state_.flags.mag_rejected = false;
   }
 
-  state_.q = kalman_support::unit(state_.q);
+  const double q_squared_norm = state_.q.squaredNorm();
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
+  if (!(q_squared_norm > 0.0 && std::isfinite(q_squared_norm)) || !state_.bias.allFinite() || !state_.p.allFinite()) {
+    // Only absurd finite input (rates around 1e100 rad/s and beyond) gets here: start afresh rather than pass NaN on.
+    reset();
+    return UpdateResult::kRejected;
+  }
+  state_.q = kalman_support::unit(state_.q);
   state_.flags.resting = rest_.update(s);
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }
 

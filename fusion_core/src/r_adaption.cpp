@@ -28,7 +28,7 @@ MagneticRAdaption::MagneticRAdaption(const Params& params) : params_(params) {
       params.dip_exit_rad > 0.0 && params.dip_exit_rad <= params.dip_enter_rad && std::isfinite(params.dip_enter_rad),
       "need 0 < dip_exit_rad <= dip_enter_rad (finite)");
   require(params.min_clean_s >= 0.0 && params.min_clean_s < 1e6, "need 0 <= min_clean_s < 1e6");
-  min_clean_ns_ = static_cast<std::uint64_t>(std::llround(params.min_clean_s * 1e9));
+  min_clean_ns_ = seconds_to_ns(params.min_clean_s);
   constexpr double kPi = 3.14159265358979323846;
   cos_dip_enter_ = params.dip_enter_rad < kPi ? std::cos(params.dip_enter_rad) : -2.0;
   cos_dip_exit_ = params.dip_exit_rad < kPi ? std::cos(params.dip_exit_rad) : -2.0;

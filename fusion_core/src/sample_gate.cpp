@@ -41,8 +41,8 @@ SampleGate::SampleGate(const Params& params) : params_(params) {
       !(params.max_abs_acc_m_s2 > 0.0) || !(params.max_abs_gyr_rad_s > 0.0) || !(params.max_abs_mag_ut > 0.0)) {
     throw std::invalid_argument("sample gate: every limit must be > 0 and rebase_after >= 1");
   }
-  max_jump_ns_ = static_cast<std::uint64_t>(std::llround(params.max_forward_jump_s * 1e9));
-  max_rebase_step_ns_ = static_cast<std::uint64_t>(std::llround(params.max_rebase_step_s * 1e9));
+  max_jump_ns_ = seconds_to_ns(params.max_forward_jump_s);
+  max_rebase_step_ns_ = seconds_to_ns(params.max_rebase_step_s);
 }
 
 SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {

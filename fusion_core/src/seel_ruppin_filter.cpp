@@ -30,8 +30,6 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                            bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
                                            rest_param_fields<P>(), timing_param_fields<P>());
 
-std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
-
 const P& checked(const P& p) {
   require_positive(kName, p.tau_acc_s, "tau_acc_s");
   require_positive(kName, p.tau_mag_s, "tau_mag_s");
@@ -39,7 +37,6 @@ const P& checked(const P& p) {
   require_positive(kName, p.max_gyro_bias_rad_s, "max_gyro_bias_rad_s");
   require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
   require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
-  p.FilterTimingParams::check(kName);
   require_positive(kName, p.mag_reference_s, "mag_reference_s");
   require_positive(kName, p.mag_max_rejection_s, "mag_max_rejection_s");
   for (const auto& [value, name] :
@@ -96,14 +93,16 @@ double signed_angle(const Vec3& v, const Vec3& w, const Vec3& n) { return atan2_
 }  // namespace
 
 SeelRuppinFilter::SeelRuppinFilter(const Params& params)
-    : params_(checked(params)), rest_(params), mag_detector_(params), rest_bias_(params) {
+    : OrientationFilter(kName, params),
+      params_(checked(params)),
+      rest_(params),
+      mag_detector_(params),
+      rest_bias_(params) {
   coeff_.tau_acc_14 = 1.4 * params.tau_acc_s;
   coeff_.tau_mag_14 = 1.4 * params.tau_mag_s;
   coeff_.tau_start_mag_14 = 1.4 * std::min(params.tau_mag_s, params.tau_acc_s);
   coeff_.bias_factor_acc = params.zeta * params.zeta / (160.0 * params.tau_acc_s);
   coeff_.bias_factor_mag = params.zeta * params.zeta / (160.0 * params.tau_mag_s);
-  coeff_.max_gap_ns = seconds_to_ns(params.max_gap_s);
-  coeff_.init_period_ns = seconds_to_ns(params.init_period_s);
   coeff_.mag_reference_ns = seconds_to_ns(params.mag_reference_s);
   coeff_.mag_max_rejection_ns = seconds_to_ns(params.mag_max_rejection_s);
   coeff_.acc_clip_test = params.max_acc_error_rad < std::numbers::pi;
@@ -158,28 +157,26 @@ double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
   return k;
 }
 
-void SeelRuppinFilter::reset() {
+void SeelRuppinFilter::clear() {
   state_ = State{};
   rest_.reset();
   mag_detector_.reset();
   rest_bias_.reset();
 }
 
-UpdateResult SeelRuppinFilter::initialise(const ImuSample& s) {
-  const std::optional<StartOrientation> start = start_orientation(s);
-  if (!start) return UpdateResult::kRejected;
-  const bool mag_usable = start->with_mag;
-  state_.q = start->q;
+UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
+  if (!physically_possible(s)) return UpdateResult::kRejected;
+  const std::optional<StartOrientation> initial = start_orientation(s);
+  if (!initial) return UpdateResult::kRejected;
+  const bool mag_usable = initial->with_mag;
+  state_.q = initial->q;
   state_.q_gyr = Quat::Identity();
   state_.acc_lp_s1 = state_.acc_lp_s2 = Vec3::Zero();
   state_.acc_lp_warmup_s = 0.0;
   state_.acc_lp_count = 1.0;  // the start-up mean begins with this sample (q_gyr = identity)
   state_.acc_lp_mean = s.acc;
-  state_.initialised = true;
   state_.heading_known = mag_usable;
-  state_.last_ns = s.timestamp_ns;
   state_.last_mag_ns = mag_usable ? s.timestamp_ns : 0;
-  state_.init_ns = s.timestamp_ns;
   state_.flags = start_flags(s.has_mag && !mag_usable);
   rest_.reset();
   start_mag_reference(s.timestamp_ns);
@@ -285,9 +282,9 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
   // The gain uses the time since the last used magnetometer reading, so tau_mag holds in seconds even when the
   // magnetometer is slower than the IMU.
   const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
-  const double dt_mag = (state_.last_mag_ns != 0 && since_mag <= coeff_.max_gap_ns)
+  const double dt_mag = (state_.last_mag_ns != 0 && since_mag <= max_gap_ns())
                             ? static_cast<double>(since_mag) * 1e-9
-                            : static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+                            : static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
   // During the start-up the heading converges as fast as the tilt: an initial heading taken with a wrong
   // vertical (a start in motion) is wrong too.
   const double k = !state_.heading_known       ? 1.0
@@ -301,21 +298,11 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
   state_.last_mag_ns = s.timestamp_ns;
 }
 
-UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
-  if (!s.finite() || !physically_possible(s)) return UpdateResult::kRejected;
-  if (!state_.initialised) return initialise(s);
-  if (s.timestamp_ns <= state_.last_ns) return UpdateResult::kRejected;
-  if (s.timestamp_ns - state_.last_ns > coeff_.max_gap_ns) {
-    const Vec3 bias = state_.gyro_bias;
-    const UpdateResult r = initialise(s);
-    state_.gyro_bias = bias;
-    return r;
-  }
-
-  const double dt = static_cast<double>(s.timestamp_ns - state_.last_ns) * 1e-9;
+UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
+  if (!physically_possible(s)) return UpdateResult::kRejected;
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = false;
-  state_.flags.initialising = s.timestamp_ns - state_.init_ns < coeff_.init_period_ns;
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
 
   // Strapdown prediction with the bias-corrected rate (eq. 14), exact for a rate constant over the step.
   if (s.has_gyr) {
@@ -342,7 +329,6 @@ UpdateResult SeelRuppinFilter::update(const ImuSample& s) {
     rest_bias_.update(s.timestamp_ns, dt, s.gyr);
     if (rest_bias_.updating()) state_.gyro_bias = rest_bias_.bias().cwiseMax(-max_bias).cwiseMin(max_bias);
   }
-  state_.last_ns = s.timestamp_ns;
   state_.flags.resting = rest_.update(s);
   return UpdateResult::kUpdated;
 }

@@ -5,28 +5,46 @@
 #include <vector>
 
 #include "bsn/fusion/orientation_filter.hpp"
-#include "bsn/sim/mimu_synthesizer.hpp"
-#include "bsn/sim/motion_model.hpp"
+#include "bsn/sim/body.hpp"
+#include "bsn/sim/magnetic_environment.hpp"
+#include "bsn/sim/sensor_model.hpp"
 
 namespace {
 
 using bsn::fusion::ImuSample;
+using bsn::fusion::Vec3;
 
-// 10 s of a noisy 100 Hz rotation, precomputed so that only the filter is timed. Every frequency is a multiple
-// of 0.1 Hz, so the motion is periodic in 10 s and the stream wraps around without a jump: a jump would time
-// the filters' large-error paths (clipping, re-convergence) instead of their usual per-sample work.
+// offset + amplitude sin(2 pi f t + phase), rad.
+bsn::sim::Signal swing(double offset, double amplitude, double frequency_hz, double phase) {
+  bsn::sim::Signal s = bsn::sim::Signal::constant_value(offset);
+  s.harmonics.push_back({amplitude, frequency_hz, phase});
+  return s;
+}
+
+// 10 s of a noisy 100 Hz rotation (yaw, pitch, roll swinging), precomputed so that only the filter is timed. Every
+// frequency is a multiple of 0.1 Hz, so the motion is periodic in 10 s and the stream wraps around without a jump: a
+// jump would time the filters' large-error paths (clipping, re-convergence) instead of their usual per-sample work.
 std::vector<ImuSample> make_stream(bool with_mag) {
-  bsn::sim::SinusoidalRotation::Params p;
-  p.yaw = {0.3, 1.0, 0.2, 0.1};  // offset rad, amplitude rad, frequency Hz, phase rad
-  p.pitch = {0.1, 0.4, 0.3, 0.5};
-  p.roll = {-0.2, 0.5, 0.1, 1.0};
-  const bsn::sim::SinusoidalRotation motion(p);
-  bsn::sim::MimuSynthesizer synth(bsn::sim::EarthField{}, bsn::sim::WhiteNoise{}, 4);
+  bsn::sim::SegmentDef segment;
+  segment.name = "body";
+  segment.rotation = {{Vec3::UnitZ(), swing(0.3, 1.0, 0.2, 0.1)},
+                      {Vec3::UnitY(), swing(0.1, 0.4, 0.3, 0.5)},
+                      {Vec3::UnitX(), swing(-0.2, 0.5, 0.1, 1.0)}};
+  const bsn::sim::Body body({segment});
+  const bsn::sim::MagneticEnvironment field;
+  bsn::sim::SensorErrors errors;  // white noise of a consumer MEMS sensor at 100 Hz, as density = SD / sqrt(rate)
+  errors.gyr.white_density = 0.005 / 10.0;
+  errors.acc.white_density = 0.02 / 10.0;
+  errors.mag.white_density = 0.3 / 10.0;
+  bsn::sim::SensorSimulator sensor(errors, 100.0, 4);
+  std::vector<bsn::sim::SegmentState> states;
   std::vector<ImuSample> stream;
   for (std::uint64_t k = 0; k < 1000; ++k) {
-    ImuSample s = synth.measure(motion.at(static_cast<double>(k) * 0.01), k * 10'000'000ull);
-    s.has_mag = with_mag;
-    stream.push_back(s);
+    const double t = static_cast<double>(k) * 0.01;
+    body.evaluate(t, states);
+    const bsn::sim::SegmentState& s = states.front();
+    stream.push_back(sensor.measure(s.gyr_sensor, s.specific_force_sensor(),
+                                    field.sensor_field(0, s.position, s.q_sensor, t), t, k * 10'000'000ull, with_mag));
   }
   return stream;
 }

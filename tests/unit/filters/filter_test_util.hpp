@@ -1,34 +1,43 @@
-// Synthetic samples shared by the complementary-filter tests (Seel-Ruppin, Madgwick, IECF, the components): a
-// still sensor with a given orientation, optionally with seeded white noise. Self-contained (no simulator), so
-// the tests pin the filters, not the simulator.
+// Synthetic samples shared by every filter test: a still sensor with a given orientation (static_sample, whose time
+// is always written with its unit: at_s(1.5) or at_ns(k * 10 * kMs)), seeded white noise, and a sensor turning
+// smoothly from the simulator (turning_sensor).
 #pragma once
 
 #include <cmath>
 #include <cstdint>
 #include <numbers>
 #include <random>
+#include <vector>
 
 #include "bsn/fusion/imu_sample.hpp"
 #include "bsn/fusion/rotation.hpp"
+#include "bsn/sim/magnetic_environment.hpp"
+#include "bsn/sim/scenario.hpp"
 
 namespace bsn::fusion::filter_test {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr std::uint64_t kMs = 1'000'000;  ///< ns
 
-/// ENU field of 49 uT with a dip of 64 deg (central Europe).
-inline const Vec3 kField(0.0, 49.0 * std::cos(64.0 * kDeg), -49.0 * std::sin(64.0 * kDeg));
+/// The simulator's default earth field, ENU, uT: 49 uT with a dip of 64 deg (central Europe).
+inline const Vec3 kField = sim::MagneticEnvironment{}.earth_field(0.0);
 
-/// Seconds to nanoseconds, rounded.
-inline std::uint64_t ns(double seconds) { return static_cast<std::uint64_t>(std::llround(seconds * 1e9)); }
+/// A sample time. Made only by at_s() or at_ns(), so every call site says its unit.
+struct SampleTime {
+  std::uint64_t ns;
+};
+inline SampleTime at_s(double seconds) { return {seconds_to_ns(seconds)}; }
+constexpr SampleTime at_ns(std::uint64_t ns) { return {ns}; }
 
 /// Angle wrapped to [-pi, pi].
 inline double wrap(double angle) { return std::remainder(angle, 2 * std::numbers::pi); }
 
-/// Noise-free sample at t_s seconds of a sensor at rest with true orientation q (sensor-to-earth) in the earth field
-/// `field` (ENU, uT); the gyro reads `gyr` (a bias, say).
-inline ImuSample static_sample(const Quat& q, double t_s, const Vec3& field = kField, const Vec3& gyr = Vec3::Zero()) {
+/// Noise-free sample at time t of a sensor at rest with true orientation q (sensor-to-earth) in the earth field
+/// `field` (ENU, uT); the gyro reads `gyr` (a bias, say), rad/s.
+inline ImuSample static_sample(const Quat& q, SampleTime t, const Vec3& field = kField,
+                               const Vec3& gyr = Vec3::Zero()) {
   ImuSample s;
-  s.timestamp_ns = ns(t_s);
+  s.timestamp_ns = t.ns;
   s.acc = q.conjugate() * Vec3(0, 0, kGravity);
   s.gyr = gyr;
   s.mag = q.conjugate() * field;
@@ -60,5 +69,37 @@ class WhiteNoise {
   std::mt19937 rng_;
   std::normal_distribution<double> acc_, gyr_, mag_;
 };
+
+/// Per-sample white noise of turning_sensor() when it is not ideal: a consumer MEMS sensor at 100 Hz.
+struct TurningNoise {
+  static constexpr double kGyrRadS = 0.005;  ///< gyro, rad/s
+  static constexpr double kAccMS2 = 0.02;    ///< accelerometer, m/s^2
+  static constexpr double kMagUT = 0.3;      ///< magnetometer, uT
+};
+
+/// A sensor at the centre of a free body turning smoothly at random (the simulator's RandomMotion, RMS rate
+/// 0.5 rad/s from 0.1 to 0.4 Hz, no translation: only gravity acts on the accelerometer), in kField, sampled at
+/// 100 Hz for duration_s from t = 0. ideal = exact readings; otherwise seeded white noise of TurningNoise.
+inline std::vector<sim::ScenarioSample> turning_sensor(std::uint64_t seed, double duration_s, bool ideal) {
+  sim::ScenarioSpec spec;
+  spec.duration_s = duration_s;
+  spec.rate_hz = 100.0;
+  spec.seed = seed;
+  sim::RandomMotion motion;
+  motion.angular_rate_rms_rad_s = 0.5;
+  motion.min_frequency_hz = 0.1;
+  motion.max_frequency_hz = 0.4;
+  motion.seed = seed;
+  spec.free_motion.random = motion;
+  const double sqrt_rate = std::sqrt(spec.rate_hz);  // white_density * sqrt(rate) = per-sample SD
+  spec.sensors.gyr.white_density = TurningNoise::kGyrRadS / sqrt_rate;
+  spec.sensors.acc.white_density = TurningNoise::kAccMS2 / sqrt_rate;
+  spec.sensors.mag.white_density = TurningNoise::kMagUT / sqrt_rate;
+  sim::ScenarioRunner runner(spec, {}, ideal);
+  std::vector<sim::ScenarioSample> samples, one;
+  samples.reserve(runner.sample_count());
+  while (runner.next(one)) samples.push_back(one.front());
+  return samples;
+}
 
 }  // namespace bsn::fusion::filter_test

@@ -1,5 +1,5 @@
 // Small synthetic-data generators shared by the Kalman filter tests (MEKF, EKF, DLKF). Seeded, self-contained:
-// they do not use the simulator so that the tests pin the filters, not the simulator.
+// they do not use the simulator, so that the tests pin the filters, not the simulator.
 #pragma once
 
 #include <algorithm>
@@ -11,24 +11,9 @@
 #include "bsn/fusion/imu_sample.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rotation.hpp"
+#include "filter_test_util.hpp"
 
-namespace bsn::fusion::test {
-
-constexpr double kDeg = std::numbers::pi / 180.0;
-constexpr std::uint64_t kMs = 1'000'000;
-
-/// ENU field of 49 uT with a dip of 64 deg (central Europe).
-inline const Vec3 kEarthField(0.0, 49.0 * std::cos(64.0 * kDeg), -49.0 * std::sin(64.0 * kDeg));
-
-/// Noise-free sample of a static sensor with orientation q (sensor-to-earth) in the field `field` (ENU).
-inline ImuSample static_sample(const Quat& q, std::uint64_t t_ns, const Vec3& field = kEarthField) {
-  ImuSample s;
-  s.timestamp_ns = t_ns;
-  s.acc = q.conjugate() * Vec3(0, 0, kGravity);
-  s.gyr = Vec3::Zero();
-  s.mag = q.conjugate() * field;
-  return s;
-}
+namespace bsn::fusion::filter_test {
 
 /// Noise levels of the synthetic sensor, as the Kalman filters model them.
 struct SensorNoise {
@@ -60,10 +45,10 @@ class RotatingSensor {
     ++k_;
     for (int i = 0; i < 3; ++i) bias_[i] += noise_.bias_walk_density * std::sqrt(dt_) * gauss();
     ImuSample s;
-    s.timestamp_ns = k_ * static_cast<std::uint64_t>(std::llround(dt_ * 1e9));
+    s.timestamp_ns = k_ * seconds_to_ns(dt_);
     s.gyr = rate(t_) + bias_ + noise_.gyr_density / std::sqrt(dt_) * gauss3();
     s.acc = q_.conjugate() * Vec3(0, 0, kGravity) + noise_.acc_sd * gauss3();
-    s.mag = q_.conjugate() * kEarthField + noise_.mag_sd * gauss3();
+    s.mag = q_.conjugate() * kField + noise_.mag_sd * gauss3();
     return s;
   }
 
@@ -75,7 +60,7 @@ class RotatingSensor {
     s.timestamp_ns = 0;
     s.gyr = rate(0.0) + bias_ + k * noise_.gyr_density / std::sqrt(dt_) * gauss3();
     s.acc = q_.conjugate() * Vec3(0, 0, kGravity) + k * noise_.acc_sd * gauss3();
-    s.mag = q_.conjugate() * kEarthField + k * noise_.mag_sd * gauss3();
+    s.mag = q_.conjugate() * kField + k * noise_.mag_sd * gauss3();
     return s;
   }
 
@@ -142,7 +127,7 @@ inline EulerDeviation fan_test_b(OrientationFilter& f) {
   const Quat q = from_yaw_pitch_roll(truth);
   EulerDeviation dev;
   for (std::uint64_t k = 0; k <= 3000; ++k) {
-    ImuSample s = static_sample(q, k * 10 * kMs);
+    ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
     s.mag += magnet_field(0.01 * static_cast<double>(k));
     f.update(s);
     const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
@@ -152,4 +137,4 @@ inline EulerDeviation fan_test_b(OrientationFilter& f) {
   return dev;
 }
 
-}  // namespace bsn::fusion::test
+}  // namespace bsn::fusion::filter_test

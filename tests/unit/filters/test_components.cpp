@@ -1,5 +1,5 @@
-// The reusable components (rest detection, low-pass gyro bias, magnetic-disturbance detection) and the contract
-// every filter of this family keeps, checked through the factory for each name.
+// The reusable components of the filters: rest detection, low-pass gyro bias, magnetic-disturbance detection, and the
+// inline rotation helpers used per sample. The contract of every filter is in test_filter_contract.cpp.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,16 +8,15 @@
 
 #include "bsn/fusion/gyro_bias_lowpass.hpp"
 #include "bsn/fusion/mag_disturbance_detector.hpp"
-#include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rest_detector.hpp"
 #include "filter_test_util.hpp"
 
 namespace bsn::fusion {
 namespace {
 
+using filter_test::at_s;
 using filter_test::kDeg;
 using filter_test::kField;
-using filter_test::ns;
 using filter_test::static_sample;
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -25,15 +24,15 @@ using filter_test::static_sample;
 
 TEST(RestDetector, RestingOnlyAfterTheMinimumStillTime) {
   RestDetector d({0.05, 0.5, 1.5});
-  for (int i = 0; i < 149; ++i) EXPECT_FALSE(d.update(static_sample(Quat::Identity(), i * 0.01))) << i;
-  EXPECT_TRUE(d.update(static_sample(Quat::Identity(), 1.5)));
+  for (int i = 0; i < 149; ++i) EXPECT_FALSE(d.update(static_sample(Quat::Identity(), at_s(i * 0.01)))) << i;
+  EXPECT_TRUE(d.update(static_sample(Quat::Identity(), at_s(1.5))));
   // A rate above the threshold ends the rest at once and restarts the timer.
-  EXPECT_FALSE(d.update(static_sample(Quat::Identity(), 1.51, kField, Vec3(0, 0.06, 0))));
-  EXPECT_FALSE(d.update(static_sample(Quat::Identity(), 2.5)));
-  EXPECT_FALSE(d.update(static_sample(Quat::Identity(), 3.99)));
-  EXPECT_TRUE(d.update(static_sample(Quat::Identity(), 4.0)));
+  EXPECT_FALSE(d.update(static_sample(Quat::Identity(), at_s(1.51), kField, Vec3(0, 0.06, 0))));
+  EXPECT_FALSE(d.update(static_sample(Quat::Identity(), at_s(2.5))));
+  EXPECT_FALSE(d.update(static_sample(Quat::Identity(), at_s(3.99))));
+  EXPECT_TRUE(d.update(static_sample(Quat::Identity(), at_s(4.0))));
   // So does a specific force off g by more than the threshold (an acceleration at zero rate).
-  ImuSample s = static_sample(Quat::Identity(), 4.01);
+  ImuSample s = static_sample(Quat::Identity(), at_s(4.01));
   s.acc.z() += 0.6;
   EXPECT_FALSE(d.update(s));
   EXPECT_THROW(RestDetector({0.0, 0.5, 1.5}), std::invalid_argument);
@@ -49,14 +48,14 @@ TEST(GyroBiasLowPass, ConvergesToAConstantBiasAtRestWithCornerFrequency) {
   std::normal_distribution<double> noise(0.0, 0.002);
   const double ts = 0.01;
   double t = 0.0;
-  for (; t < 2.0 - 1e-9; t += ts) lp.update(ns(t), ts, bias + Vec3(noise(rng), noise(rng), noise(rng)));
+  for (; t < 2.0 - 1e-9; t += ts) lp.update(seconds_to_ns(t), ts, bias + Vec3(noise(rng), noise(rng), noise(rng)));
   EXPECT_EQ(lp.bias(), Vec3::Zero());  // not updated before t_b
   // One time constant 1 / (2 pi f_c) after updating starts, the estimate has covered 1 - 1/e of the way.
   const double tau = 1.0 / (2 * std::numbers::pi * 0.05);
   const double t_start = 2.0 + ts;
-  for (; t < t_start + tau; t += ts) lp.update(ns(t), ts, bias);
+  for (; t < t_start + tau; t += ts) lp.update(seconds_to_ns(t), ts, bias);
   EXPECT_NEAR(lp.bias().y() / bias.y(), 1 - std::exp(-1.0), 0.01);
-  for (; t < 40.0; t += ts) lp.update(ns(t), ts, bias + Vec3(noise(rng), noise(rng), noise(rng)));
+  for (; t < 40.0; t += ts) lp.update(seconds_to_ns(t), ts, bias + Vec3(noise(rng), noise(rng), noise(rng)));
   EXPECT_LT((lp.bias() - bias).norm(), 3e-4);
   EXPECT_TRUE(lp.updating());
 }
@@ -65,17 +64,17 @@ TEST(GyroBiasLowPass, FreezesWhileAnyComponentExceedsOmegaMin) {
   GyroBiasLowPass lp;
   const Vec3 bias(0.01, 0.0, -0.01);
   double t = 0.0;
-  for (; t < 20.0; t += 0.01) lp.update(ns(t), 0.01, bias);
+  for (; t < 20.0; t += 0.01) lp.update(seconds_to_ns(t), 0.01, bias);
   const Vec3 learned = lp.bias();
   // One component above 3 deg/s (the others at the bias) is motion: nothing is learned from it.
-  for (; t < 30.0; t += 0.01) lp.update(ns(t), 0.01, bias + Vec3(0, 4 * kDeg, 0));
+  for (; t < 30.0; t += 0.01) lp.update(seconds_to_ns(t), 0.01, bias + Vec3(0, 4 * kDeg, 0));
   EXPECT_EQ(lp.bias(), learned);
   EXPECT_FALSE(lp.updating());
   // Still again: the update resumes only after t_b.
   const double still_from = t;
-  for (; t < still_from + 1.9; t += 0.01) lp.update(ns(t), 0.01, Vec3(0.02, 0.0, 0.0));
+  for (; t < still_from + 1.9; t += 0.01) lp.update(seconds_to_ns(t), 0.01, Vec3(0.02, 0.0, 0.0));
   EXPECT_EQ(lp.bias(), learned);
-  for (; t < still_from + 2.5; t += 0.01) lp.update(ns(t), 0.01, Vec3(0.02, 0.0, 0.0));
+  for (; t < still_from + 2.5; t += 0.01) lp.update(seconds_to_ns(t), 0.01, Vec3(0.02, 0.0, 0.0));
   EXPECT_NE(lp.bias(), learned);
 }
 
@@ -98,7 +97,7 @@ TEST(MagDisturbanceDetector, TwoThresholdsDoNotChatterWhereOneDoes) {
     bool last = false;
     for (int i = 1; i < 3000; ++i) {
       const double scale = 1.0 + 0.08 + noise(rng);  // hovers around 8 % above the reference
-      const bool disturbed = d.update(ns(i * 0.01), kField * scale, Vec3::UnitZ());
+      const bool disturbed = d.update(seconds_to_ns(i * 0.01), kField * scale, Vec3::UnitZ());
       changes += disturbed != last;
       last = disturbed;
     }
@@ -114,17 +113,17 @@ TEST(MagDisturbanceDetector, TwoThresholdsDoNotChatterWhereOneDoes) {
 TEST(MagDisturbanceDetector, CleanAgainOnlyAfterTheMinimumDurationInsideTheInnerBand) {
   MagDisturbanceDetector d;  // enter 10 %, leave 5 %, min_clean 1 s
   EXPECT_FALSE(d.update(0, kField, Vec3::UnitZ()));
-  EXPECT_TRUE(d.update(ns(0.01), kField * 1.2, Vec3::UnitZ()));   // magnitude: at once
-  EXPECT_TRUE(d.update(ns(0.02), kField * 1.07, Vec3::UnitZ()));  // between the bands: still disturbed
-  for (int i = 3; i < 102; ++i) EXPECT_TRUE(d.update(ns(i * 0.01), kField * 1.02, Vec3::UnitZ())) << i;
+  EXPECT_TRUE(d.update(seconds_to_ns(0.01), kField * 1.2, Vec3::UnitZ()));   // magnitude: at once
+  EXPECT_TRUE(d.update(seconds_to_ns(0.02), kField * 1.07, Vec3::UnitZ()));  // between the bands: still disturbed
+  for (int i = 3; i < 102; ++i) EXPECT_TRUE(d.update(seconds_to_ns(i * 0.01), kField * 1.02, Vec3::UnitZ())) << i;
   // A sample between the bands restarts the clean timer.
-  EXPECT_TRUE(d.update(ns(1.02), kField * 1.07, Vec3::UnitZ()));
-  for (int i = 103; i < 202; ++i) EXPECT_TRUE(d.update(ns(i * 0.01), kField, Vec3::UnitZ())) << i;
-  EXPECT_FALSE(d.update(ns(2.03), kField, Vec3::UnitZ()));
+  EXPECT_TRUE(d.update(seconds_to_ns(1.02), kField * 1.07, Vec3::UnitZ()));
+  for (int i = 103; i < 202; ++i) EXPECT_TRUE(d.update(seconds_to_ns(i * 0.01), kField, Vec3::UnitZ())) << i;
+  EXPECT_FALSE(d.update(seconds_to_ns(2.03), kField, Vec3::UnitZ()));
   // Dip: the same magnitude turned 12 deg towards the vertical is a disturbance.
   const Vec3 steeper = Eigen::AngleAxisd(12 * kDeg, Vec3::UnitX()) * kField;
   EXPECT_NEAR(steeper.norm(), kField.norm(), 1e-9);
-  EXPECT_TRUE(d.update(ns(2.04), steeper, Vec3::UnitZ()));
+  EXPECT_TRUE(d.update(seconds_to_ns(2.04), steeper, Vec3::UnitZ()));
   EXPECT_THROW(MagDisturbanceDetector({0.05, 0.10, 0.14, 0.07, 1.0}), std::invalid_argument);
 }
 
@@ -140,7 +139,7 @@ TEST(MagDisturbanceDetector, DipDecisionsAreThoseOfTheAngles) {
       MagDisturbanceDetector d;                    // enter 0.14 rad, leave 0.07 rad
       d.update(0, reference, Vec3::UnitZ());
       const Vec3 turned = Eigen::AngleAxisd(-change_deg * kDeg, Vec3::UnitX()) * reference;
-      const bool disturbed = d.update(ns(0.01), turned, Vec3::UnitZ());
+      const bool disturbed = d.update(seconds_to_ns(0.01), turned, Vec3::UnitZ());
       EXPECT_EQ(disturbed, std::abs(change_deg * kDeg) > 0.14) << ref_dip_deg << " " << change_deg;
       EXPECT_EQ(d.state().inside_leave_band, std::abs(change_deg * kDeg) < 0.07) << ref_dip_deg << " " << change_deg;
       EXPECT_NEAR(d.last_dip_deviation(), std::abs(change_deg) * kDeg, 1e-9);
@@ -164,131 +163,6 @@ TEST(RotationHelpers, InverseSqrtNearOneAndRotateMatchTheirDefinitions) {
     EXPECT_LT((rotate(q, v) - q * v).norm(), 1e-14 * v.norm());
   }
 }
-
-// ---------------------------------------------------------------------------------------------------------------
-// The contract of every filter of this family, through the factory.
-
-class FilterContract : public ::testing::TestWithParam<const char*> {
- protected:
-  std::unique_ptr<OrientationFilter> make() const { return make_filter({GetParam(), {}}); }
-  bool nine_d() const { return std::string(GetParam()).back() != '6'; }
-};
-
-TEST_P(FilterContract, IsListedAndNamed) {
-  const auto names = filter_names();
-  EXPECT_NE(std::find(names.begin(), names.end(), GetParam()), names.end());
-  EXPECT_EQ(make()->name(), GetParam());
-  EXPECT_THROW(make_filter({GetParam(), {{"no_such_parameter", 1.0}}}), std::invalid_argument);
-}
-
-TEST_P(FilterContract, InitialisesFromTheFirstSampleForAnyHeading) {
-  for (double yaw : {-179.0, -100.0, -30.0, 0.0, 45.0, 120.0, 180.0}) {
-    auto f = make();
-    const Quat q = from_yaw_pitch_roll({yaw * kDeg, 20 * kDeg, -35 * kDeg});
-    ASSERT_EQ(f->update(static_sample(q, 0)), UpdateResult::kInitialised);
-    EXPECT_TRUE(f->flags().reinitialised);
-    EXPECT_TRUE(f->flags().initialising);
-    const YawPitchRoll est = to_yaw_pitch_roll(f->orientation());
-    EXPECT_NEAR(est.pitch, 20 * kDeg, 1e-9);
-    EXPECT_NEAR(est.roll, -35 * kDeg, 1e-9);
-    EXPECT_LT(angle_between(f->orientation(), q), 1e-9) << yaw;  // 6D filters too take the first heading
-  }
-}
-
-TEST_P(FilterContract, RejectsNonFiniteInputAndTimeNotAdvancingWithoutTouchingTheState) {
-  auto f = make();
-  const Quat q = from_yaw_pitch_roll({30 * kDeg, 5 * kDeg, 0});
-  f->update(static_sample(q, 0));
-  for (int i = 1; i <= 300; ++i) f->update(static_sample(q, i * 0.01, kField, Vec3(0.01, 0, 0)));
-  const Quat q_before = f->orientation();
-  const Vec3 bias_before = f->gyro_bias();
-  for (double bad : {std::nan(""), std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()}) {
-    for (int channel = 0; channel < 3; ++channel) {
-      ImuSample s = static_sample(q, 3.01);
-      (channel == 0 ? s.acc : channel == 1 ? s.gyr : s.mag)[channel] = bad;
-      EXPECT_EQ(f->update(s), UpdateResult::kRejected);
-    }
-  }
-  EXPECT_EQ(f->update(static_sample(q, 3.0)), UpdateResult::kRejected);  // dt = 0
-  EXPECT_EQ(f->update(static_sample(q, 2.5)), UpdateResult::kRejected);  // dt < 0
-  EXPECT_EQ(f->orientation().coeffs(), q_before.coeffs());
-  EXPECT_EQ(f->gyro_bias(), bias_before);
-  EXPECT_EQ(f->update(static_sample(q, 3.01)), UpdateResult::kUpdated);
-}
-
-TEST_P(FilterContract, LongGapReinitialisesWithTheFlagShortGapIsBridged) {
-  auto f = make();
-  const Quat q = from_yaw_pitch_roll({-60 * kDeg, 10 * kDeg, 5 * kDeg});
-  f->update(static_sample(q, 0));
-  for (int i = 1; i <= 100; ++i) f->update(static_sample(q, i * 0.01));
-  EXPECT_EQ(f->update(static_sample(q, 1.5)), UpdateResult::kUpdated);  // 0.5 s < max_gap_s = 1 s
-  EXPECT_FALSE(f->flags().reinitialised);
-  const Quat q2 = from_yaw_pitch_roll({100 * kDeg, -30 * kDeg, 20 * kDeg});
-  EXPECT_EQ(f->update(static_sample(q2, 5.0)), UpdateResult::kInitialised);
-  EXPECT_TRUE(f->flags().reinitialised);
-  EXPECT_TRUE(f->flags().initialising);
-  EXPECT_LT(angle_between(f->orientation(), q2), 1e-9);
-  EXPECT_EQ(f->update(static_sample(q2, 1e7)), UpdateResult::kInitialised);  // huge dt
-  EXPECT_TRUE(f->orientation().coeffs().allFinite());
-  EXPECT_EQ(f->update(static_sample(q2, 1e7 + 0.01)), UpdateResult::kUpdated);
-  EXPECT_FALSE(f->flags().reinitialised);
-}
-
-TEST_P(FilterContract, HostileFiniteInputNeverProducesNaN) {
-  auto f = make();
-  f->update(static_sample(Quat::Identity(), 0));
-  std::mt19937 rng(13);
-  std::uniform_real_distribution<double> exponent(-30, 30), sign(-1, 1);
-  double t = 0.0;
-  for (int i = 0; i < 20000; ++i) {
-    t += (i % 101 == 0) ? 1e4 : (i % 7 == 0 ? 1e-9 : 0.01);
-    ImuSample s;
-    s.timestamp_ns = ns(t);
-    for (int k = 0; k < 3; ++k) {
-      s.acc[k] = sign(rng) * std::pow(10.0, exponent(rng));
-      s.gyr[k] = sign(rng) * std::pow(10.0, 10 * exponent(rng));
-      s.mag[k] = (i % 11 == 0) ? 0.0 : sign(rng) * std::pow(10.0, exponent(rng));
-    }
-    s.has_mag = i % 3 != 0;
-    s.has_gyr = i % 13 != 0;
-    f->update(s);
-    ASSERT_TRUE(f->orientation().coeffs().allFinite()) << i;
-    ASSERT_NEAR(f->orientation().norm(), 1.0, 1e-9) << i;
-    ASSERT_TRUE(f->gyro_bias().allFinite()) << i;
-  }
-}
-
-// A magnetometer at a fifth of the IMU rate still brings the heading to a turned field; samples without it are
-// 6D updates. 6D filters must ignore the magnetometer altogether.
-TEST_P(FilterContract, SlowMagnetometerStillCorrectsHeadingAnd6DIgnoresIt) {
-  auto f = make();
-  const Quat q = from_yaw_pitch_roll({10 * kDeg, 0, 0});
-  f->update(static_sample(q, 0));
-  const Vec3 turned = Eigen::AngleAxisd(40 * kDeg, Vec3::UnitZ()) * kField;
-  for (int i = 1; i <= 6000; ++i) {
-    ImuSample s = static_sample(q, i * 0.01, turned);
-    s.has_mag = i % 5 == 0;
-    ASSERT_EQ(f->update(s), UpdateResult::kUpdated);
-  }
-  const double yaw = to_yaw_pitch_roll(f->orientation()).yaw;
-  // 6D filters keep the initial heading. Seel-Ruppin's integral term (zeta) takes part of a heading step
-  // into its bias estimate and overshoots by about a degree, decaying over minutes: hence 1.5 deg.
-  EXPECT_NEAR(yaw, nine_d() ? -30 * kDeg : 10 * kDeg, 1.5 * kDeg);
-}
-
-TEST_P(FilterContract, RestingAndInitialisingFlags) {
-  auto f = make();
-  f->update(static_sample(Quat::Identity(), 0));
-  EXPECT_TRUE(f->flags().initialising);
-  for (int i = 1; i <= 400; ++i) f->update(static_sample(Quat::Identity(), i * 0.01));
-  EXPECT_FALSE(f->flags().initialising);
-  EXPECT_TRUE(f->flags().resting);
-  f->update(static_sample(Quat::Identity(), 4.01, kField, Vec3(0.5, 0, 0)));
-  EXPECT_FALSE(f->flags().resting);
-}
-
-INSTANTIATE_TEST_SUITE_P(SeedFilters, FilterContract,
-                         ::testing::Values("seel_ruppin", "madgwick", "madgwick6", "iecf", "iecf6"));
 
 }  // namespace
 }  // namespace bsn::fusion

@@ -16,12 +16,12 @@
 namespace bsn::fusion {
 namespace {
 
-using namespace bsn::fusion::test;
+using namespace bsn::fusion::filter_test;
 
 TEST(Dlkf, TriadMatchesTheTrueOrientationForAnyHeadingAndEulerEq4) {
   for (double yaw : {-179.0, -100.0, -10.0, 0.0, 45.0, 135.0, 180.0}) {
     const Quat q = from_yaw_pitch_roll({yaw * kDeg, 30 * kDeg, -50 * kDeg});
-    const ImuSample s = static_sample(q, 0);
+    const ImuSample s = static_sample(q, at_ns(0));
     EXPECT_LT(angle_between(DlkfFilter::triad(s.acc, s.mag), q), 1e-12) << yaw;
     // Roll and pitch depend on the first vector only: any field gives the same inclination.
     const Quat other = DlkfFilter::triad(s.acc, s.mag + Vec3(20, -5, 30));
@@ -69,7 +69,7 @@ TEST(Dlkf, BothFiltersConsistentNeesOnLongSimulatedRuns) {
     Eigen::Matrix<double, 6, 1> eg, em;
     eg << sensor.q().conjugate() * Vec3(0, 0, kGravity) - f.state().gravity.vector(),
         ext - f.state().gravity.disturbance();
-    em << sensor.q().conjugate() * kEarthField - f.state().magnetic.vector(), dist - f.state().magnetic.disturbance();
+    em << sensor.q().conjugate() * kField - f.state().magnetic.vector(), dist - f.state().magnetic.disturbance();
     nees_g += eg.dot(f.gravity_covariance().ldlt().solve(eg));
     nees_m += em.dot(f.magnetic_covariance().ldlt().solve(em));
   }
@@ -108,11 +108,11 @@ TEST(Dlkf, SequentialScalarCorrectionEqualsTheBatchUpdate) {
 TEST(Dlkf, StartsWithoutMagnetometerAndTakesTheHeadingFromTheFirstOne) {
   DlkfFilter f;
   const Quat q = from_yaw_pitch_roll({-2.0, 0.2, 0.1});
-  ImuSample s = static_sample(q, 0);
+  ImuSample s = static_sample(q, at_ns(0));
   s.has_mag = false;
   ASSERT_EQ(f.update(s), UpdateResult::kInitialised);
   EXPECT_NEAR(to_yaw_pitch_roll(f.orientation()).yaw, 0.0, 1e-9);
-  f.update(static_sample(q, 10 * kMs));
+  f.update(static_sample(q, at_ns(10 * kMs)));
   EXPECT_LT(angle_between(f.orientation(), q), 1e-6);
 }
 

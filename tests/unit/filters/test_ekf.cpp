@@ -14,7 +14,7 @@
 namespace bsn::fusion {
 namespace {
 
-using namespace bsn::fusion::test;
+using namespace bsn::fusion::filter_test;
 
 // Fan test B with all magnetic adaption off (Fan §3.2): the joint update pulls roll or pitch with the magnet (Fan
 // measured 1.2 deg); here the bound is 0.3 deg, three times the 0.1 deg that the decoupled filters must keep.

@@ -12,6 +12,7 @@
 namespace bsn::fusion {
 namespace {
 
+using filter_test::at_s;
 using filter_test::kDeg;
 using filter_test::kField;
 using filter_test::static_sample;
@@ -27,7 +28,7 @@ std::pair<double, double> magnet_test(IecfFilter& f) {
   double max_tilt = 0.0, max_yaw = 0.0;
   for (int i = 0; i <= 2500; ++i) {
     const double t = i * 0.01;
-    ImuSample s = static_sample(q_true, t);
+    ImuSample s = static_sample(q_true, at_s(t));
     const double phase = std::fmod(t, 5.0);
     const double bump = phase < 2.0 ? std::pow(std::sin(std::numbers::pi * phase / 2.0), 2) : 0.0;
     s.mag += bump * magnet_sensor;
@@ -69,11 +70,11 @@ TEST(Iecf, HeadingConvergesWithTimeConstantOneOverKAndNeverTilts) {
     p.gain = gain;
     IecfFilter f(p, true);
     const Quat q_true = from_yaw_pitch_roll({0, 8 * kDeg, -12 * kDeg});
-    for (int i = 0; i <= 400; ++i) f.update(static_sample(q_true, i * 0.01));  // past the 3 s ramp
+    for (int i = 0; i <= 400; ++i) f.update(static_sample(q_true, at_s(i * 0.01)));  // past the 3 s ramp
     const Vec3 turned = Eigen::AngleAxisd(10 * kDeg, Vec3::UnitZ()) * kField;
     double max_tilt = 0.0, one_over_e_time = -1.0;
     for (int i = 1; i <= static_cast<int>(3.0 / gain / 0.01); ++i) {
-      f.update(static_sample(q_true, 4.0 + i * 0.01, turned));
+      f.update(static_sample(q_true, at_s(4.0 + i * 0.01), turned));
       const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
       max_tilt = std::max({max_tilt, std::abs(est.pitch - 8 * kDeg), std::abs(est.roll + 12 * kDeg)});
       if (one_over_e_time < 0 && std::abs(est.yaw + 10 * kDeg) <= 10 * kDeg * std::exp(-1.0))
@@ -93,10 +94,10 @@ TEST(Iecf, StartupGainRampsFromInitialGainToGain) {
   // The high start-up gain removes a 20 deg heading error within half a second; later the same takes seconds.
   auto heading_error_after = [](double start_s) {
     IecfFilter g;
-    g.update(static_sample(Quat::Identity(), 0));
-    for (double t = 0.01; t < start_s; t += 0.01) g.update(static_sample(Quat::Identity(), t));
+    g.update(static_sample(Quat::Identity(), at_s(0)));
+    for (double t = 0.01; t < start_s; t += 0.01) g.update(static_sample(Quat::Identity(), at_s(t)));
     const Vec3 turned = Eigen::AngleAxisd(20 * kDeg, Vec3::UnitZ()) * kField;
-    for (double t = start_s; t < start_s + 0.5; t += 0.01) g.update(static_sample(Quat::Identity(), t, turned));
+    for (double t = start_s; t < start_s + 0.5; t += 0.01) g.update(static_sample(Quat::Identity(), at_s(t), turned));
     return std::abs(wrap(to_yaw_pitch_roll(g.orientation()).yaw + 20 * kDeg));
   };
   EXPECT_LT(heading_error_after(0.02), 2 * kDeg);
@@ -108,10 +109,10 @@ TEST(Iecf, StartupGainRampsFromInitialGainToGain) {
 TEST(Iecf, LowPassBiasStopsYawDriftOfIecf6) {
   auto f = make_filter({"iecf6", {}});
   const Vec3 bias(0.004, -0.006, 0.02);  // rad/s, below omega_min = 3 deg/s
-  f->update(static_sample(Quat::Identity(), 0, kField, bias));
+  f->update(static_sample(Quat::Identity(), at_s(0), kField, bias));
   double yaw_at_40 = 0.0;
   for (int i = 1; i <= 5000; ++i) {
-    f->update(static_sample(Quat::Identity(), i * 0.01, kField, bias));
+    f->update(static_sample(Quat::Identity(), at_s(i * 0.01), kField, bias));
     if (i == 4000) yaw_at_40 = to_yaw_pitch_roll(f->orientation()).yaw;
   }
   EXPECT_LT((f->gyro_bias() - bias).norm(), 1e-4);

@@ -23,7 +23,7 @@
 namespace bsn::fusion {
 namespace {
 
-using namespace bsn::fusion::test;
+using namespace bsn::fusion::filter_test;
 
 using Parameters = std::vector<std::pair<std::string, double>>;
 
@@ -133,12 +133,12 @@ TYPED_TEST(KalmanFilter, InitialisesFromTheFirstSampleForAnyHeadingAndStaysOnASt
   for (double yaw : {-179.0, -120.0, -45.0, 0.0, 60.0, 135.0, 180.0}) {
     auto f = TypeParam::make();
     const Quat q = from_yaw_pitch_roll({yaw * kDeg, -25 * kDeg, 40 * kDeg});
-    ASSERT_EQ(f.update(static_sample(q, 0)), UpdateResult::kInitialised);
+    ASSERT_EQ(f.update(static_sample(q, at_ns(0))), UpdateResult::kInitialised);
     EXPECT_LT(angle_between(f.orientation(), q), 1e-9) << yaw;
     EXPECT_TRUE(f.flags().reinitialised);
     EXPECT_TRUE(f.flags().initialising);
     for (std::uint64_t k = 1; k <= 500; ++k)
-      ASSERT_EQ(f.update(static_sample(q, k * 10 * kMs)), UpdateResult::kUpdated);
+      ASSERT_EQ(f.update(static_sample(q, at_ns(k * 10 * kMs))), UpdateResult::kUpdated);
     EXPECT_LT(angle_between(f.orientation(), q), TypeParam::kStaticHoldRad) << yaw;
     EXPECT_TRUE(f.flags().resting);
     EXPECT_FALSE(f.flags().initialising);
@@ -160,7 +160,7 @@ TYPED_TEST(KalmanFilter, StaticAccuracyAnyHeadingWithNoiseAndBias) {
     double sq = 0;
     int count = 0;
     for (std::uint64_t k = 0; k <= 6000; ++k) {
-      ImuSample s = static_sample(q, k * 10 * kMs);
+      ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
       s.acc += 0.02 * n3();
       s.mag += 0.2 * n3();
       s.gyr = bias + 0.003 * n3();
@@ -208,26 +208,26 @@ TYPED_TEST(KalmanFilter, CovarianceStaysSymmetricPositiveDefinite) {
 TYPED_TEST(KalmanFilter, BadInputNeverTouchesTheState) {
   auto f = TypeParam::make();
   const Quat q = from_yaw_pitch_roll({1.0, 0.2, -0.3});
-  f.update(static_sample(q, 0));
-  f.update(static_sample(q, 10 * kMs));
+  f.update(static_sample(q, at_ns(0)));
+  f.update(static_sample(q, at_ns(10 * kMs)));
   const auto before = f.state();
-  ImuSample bad = static_sample(q, 20 * kMs);
+  ImuSample bad = static_sample(q, at_ns(20 * kMs));
   bad.gyr.x() = std::nan("");
   EXPECT_EQ(f.update(bad), UpdateResult::kRejected);
-  bad = static_sample(q, 20 * kMs);
+  bad = static_sample(q, at_ns(20 * kMs));
   bad.acc.y() = std::nan("");
   EXPECT_EQ(f.update(bad), UpdateResult::kRejected);
-  bad = static_sample(q, 20 * kMs);
+  bad = static_sample(q, at_ns(20 * kMs));
   bad.mag.z() = INFINITY;
   EXPECT_EQ(f.update(bad), UpdateResult::kRejected);
-  EXPECT_EQ(f.update(static_sample(q, 10 * kMs)), UpdateResult::kRejected);  // zero dt
-  EXPECT_EQ(f.update(static_sample(q, 5 * kMs)), UpdateResult::kRejected);   // backwards
+  EXPECT_EQ(f.update(static_sample(q, at_ns(10 * kMs))), UpdateResult::kRejected);  // zero dt
+  EXPECT_EQ(f.update(static_sample(q, at_ns(5 * kMs))), UpdateResult::kRejected);   // backwards
   TypeParam::expect_same_state(before, f.state());
   // A gap longer than max_gap_s re-initialises and says so.
-  EXPECT_EQ(f.update(static_sample(q, 10 * kMs + 5'000 * kMs)), UpdateResult::kInitialised);
+  EXPECT_EQ(f.update(static_sample(q, at_ns(10 * kMs + 5'000 * kMs))), UpdateResult::kInitialised);
   EXPECT_TRUE(f.flags().reinitialised);
   // Saturated values and a huge step within the gap limit never give a non-finite state.
-  ImuSample wild = static_sample(q, 10 * kMs + 5'900 * kMs);
+  ImuSample wild = static_sample(q, at_ns(10 * kMs + 5'900 * kMs));
   wild.gyr = Vec3(1e6, -1e6, 1e6);
   wild.acc = Vec3(1e9, 0, -1e9);
   wild.mag = Vec3(1e9, 1e9, 0);

@@ -13,6 +13,7 @@
 namespace bsn::fusion {
 namespace {
 
+using filter_test::at_s;
 using filter_test::kDeg;
 using filter_test::kField;
 using filter_test::static_sample;
@@ -71,8 +72,8 @@ TEST(Madgwick, ConvergesToTheTrueOrientationAtRest) {
     MadgwickFilter f(p, nine_d);
     const Quat q_true = from_yaw_pitch_roll({70 * kDeg, -20 * kDeg, 15 * kDeg});
     const Quat q_start = from_yaw_pitch_roll({30 * kDeg, 20 * kDeg, -25 * kDeg});
-    f.update(static_sample(q_start, 0));
-    for (int i = 1; i <= 3000; ++i) f.update(static_sample(q_true, i * 0.01));
+    f.update(static_sample(q_start, at_s(0)));
+    for (int i = 1; i <= 3000; ++i) f.update(static_sample(q_true, at_s(i * 0.01)));
     const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
     if (nine_d) {
       EXPECT_LT(angle_between(f.orientation(), q_true), 0.05 * kDeg);
@@ -92,8 +93,8 @@ TEST(Madgwick, CorrectionRateIsTwoBeta) {
     MadgwickFilter::Params p;
     p.beta = beta;
     MadgwickFilter f(p, false);
-    f.update(static_sample(from_yaw_pitch_roll({0, 0, 30 * kDeg}), 0));
-    for (int i = 1; i <= 100; ++i) f.update(static_sample(Quat::Identity(), i * 0.01));
+    f.update(static_sample(from_yaw_pitch_roll({0, 0, 30 * kDeg}), at_s(0)));
+    for (int i = 1; i <= 100; ++i) f.update(static_sample(Quat::Identity(), at_s(i * 0.01)));
     const double turned = 30 * kDeg - to_yaw_pitch_roll(f.orientation()).roll;
     EXPECT_LE(turned, 2 * beta * 1.0 + 1e-9) << beta;
     EXPECT_GE(turned, 0.85 * 2 * beta * 1.0) << beta;
@@ -109,11 +110,11 @@ TEST(Madgwick, HeadingJumpTiltsTheGradientDescent) {
     p.beta = 0.1;  // "reasonably fast convergence" (the paper) and Fan's setting
     MadgwickFilter f(p, true);
     const Quat q_true = Quat::Identity();
-    f.update(static_sample(q_true, 0));
+    f.update(static_sample(q_true, at_s(0)));
     const Vec3 turned = Eigen::AngleAxisd(jump_deg * kDeg, Vec3::UnitZ()) * kField;
     double max_tilt = 0.0;
     for (int i = 1; i <= 6000; ++i) {
-      f.update(static_sample(q_true, i * 0.01, turned));
+      f.update(static_sample(q_true, at_s(i * 0.01), turned));
       const YawPitchRoll est = to_yaw_pitch_roll(f.orientation());
       max_tilt = std::max({max_tilt, std::abs(est.pitch), std::abs(est.roll)});
     }
@@ -133,7 +134,7 @@ TEST(Madgwick, MagnetNearStaticSensorMovesRollOrPitch) {
   double max_tilt = 0.0;
   for (int i = 0; i <= 2500; ++i) {
     const double t = i * 0.01;
-    ImuSample s = static_sample(q_true, t);
+    ImuSample s = static_sample(q_true, at_s(t));
     const double phase = std::fmod(t, 5.0);
     s.mag += (phase < 2.0 ? std::pow(std::sin(std::numbers::pi * phase / 2.0), 2) : 0.0) * magnet_sensor;
     f.update(s);
@@ -145,9 +146,9 @@ TEST(Madgwick, MagnetNearStaticSensorMovesRollOrPitch) {
 
 TEST(Madgwick, SixAxisVariantIgnoresTheMagnetometer) {
   auto f = make_filter({"madgwick6", {}});
-  f->update(static_sample(Quat::Identity(), 0));
+  f->update(static_sample(Quat::Identity(), at_s(0)));
   const Vec3 turned = Eigen::AngleAxisd(90 * kDeg, Vec3::UnitZ()) * kField;
-  for (int i = 1; i <= 500; ++i) f->update(static_sample(Quat::Identity(), i * 0.01, turned));
+  for (int i = 1; i <= 500; ++i) f->update(static_sample(Quat::Identity(), at_s(i * 0.01), turned));
   EXPECT_LT(angle_between(f->orientation(), Quat::Identity()), 1e-9);
   EXPECT_FALSE(f->flags().mag_rejected);
 }
@@ -161,9 +162,9 @@ TEST(Madgwick, HugeStepsStayUnit) {
     MadgwickFilter f(p, true);
     std::mt19937 rng(8);
     const Quat q_true = random_orientation(rng);
-    f.update(static_sample(Quat::Identity(), 0));
+    f.update(static_sample(Quat::Identity(), at_s(0)));
     for (int i = 1; i <= 300; ++i) {
-      ASSERT_EQ(f.update(static_sample(q_true, i * 0.01)), UpdateResult::kUpdated);
+      ASSERT_EQ(f.update(static_sample(q_true, at_s(i * 0.01))), UpdateResult::kUpdated);
       ASSERT_NEAR(f.orientation().norm(), 1.0, 1e-12) << beta << " " << i;
     }
   }

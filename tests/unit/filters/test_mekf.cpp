@@ -16,7 +16,7 @@
 namespace bsn::fusion {
 namespace {
 
-using namespace bsn::fusion::test;
+using namespace bsn::fusion::filter_test;
 using mekf::Mat6;
 
 // Matrix exponential by scaling and squaring of a Taylor series; exact to rounding for the small norms used here.
@@ -108,7 +108,7 @@ TEST(Mekf, RAdaptionRejectsTheMagnetAndKeepsTheYaw) {
     p.mag_rejection = rejection;
     MekfFilter f(p, false);
     for (std::uint64_t k = 0; k <= 3000; ++k) {
-      ImuSample s = static_sample(q, k * 10 * kMs);
+      ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
       s.mag += magnet_field(0.01 * static_cast<double>(k));
       f.update(s);
       rejected[rejection] += f.flags().mag_rejected ? 1 : 0;
@@ -168,7 +168,7 @@ TEST(Mekf, AdaptiveSwitchesByIntensityNeverTwiceWithinTenSeconds) {
   int intensity_at_20s = -1, intensity_at_40s = -1;
   for (std::uint64_t k = 0; k <= 8000; ++k) {
     const double t = 0.01 * static_cast<double>(k);
-    ImuSample s = static_sample(q, k * 10 * kMs);
+    ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
     if (t >= 20 && t < 40) {
       s.gyr = Vec3(0, 0, 5.0);  // 290 deg/s: intermediate
     } else if (t >= 40 && static_cast<int>((t - 40) / 2) % 2 == 0) {
@@ -201,7 +201,7 @@ TEST(Mekf, AdaptiveConfirmsASwitchOnTheHighestClassSeenAtMotionOnset) {
     const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
     for (std::uint64_t k = 0; k <= 2100; ++k) {
       const double t = 0.01 * static_cast<double>(k);
-      ImuSample s = static_sample(q, k * 10 * kMs);
+      ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
       if (t >= 20.0 && t < 20.2) {
         s.gyr = Vec3(0, 0, 0.5);  // 29 deg/s: slow
       } else if (t >= 20.2) {
@@ -223,7 +223,7 @@ TEST(Mekf, AdaptiveCapsTheBiasCovarianceWhenEnteringAStiffSet) {
   MekfFilter f(MekfFilter::Params{}, true);  // starts with the fast set, initial bias sigma 0.01 rad/s
   const Quat q = from_yaw_pitch_roll({-1.0, 0.2, 0.1});
   for (std::uint64_t k = 0; k <= 1100; ++k) {
-    f.update(static_sample(q, k * 10 * kMs));
+    f.update(static_sample(q, at_ns(k * 10 * kMs)));
     if (f.state().switches == 1) {
       EXPECT_EQ(f.intensity(), 0);
       const double sigma_bg = kNezTable3[0].sigma_bg;

@@ -32,15 +32,10 @@ class ComplementaryFilter final : public OrientationFilter {
   struct Coefficients {
     double inv_tau_acc = 0.0;  ///< 1/tau_acc, 1/s; gain per sample is 1 - exp(-dt/tau)
     double inv_tau_mag = 0.0;  ///< 1/tau_mag, 1/s
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
   };
 
   struct State {
     Quat q = Quat::Identity();  ///< sensor-to-earth
-    bool initialised = false;
-    std::uint64_t last_ns = 0;  ///< timestamp of the last used sample
-    std::uint64_t init_ns = 0;  ///< timestamp of the last (re)initialisation
     double mag_ref_norm = 0.0;  ///< |mag| at initialisation, uT; 0 = not known yet
     double gain_dt_s = -1.0;    ///< step for which gain_acc and gain_mag hold (dt rarely changes), s
     double gain_acc = 0.0;      ///< 1 - exp(-dt / tau_acc)
@@ -52,22 +47,21 @@ class ComplementaryFilter final : public OrientationFilter {
   explicit ComplementaryFilter(const Params& params);
   ComplementaryFilter() : ComplementaryFilter(Params{}) {}
 
-  UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return Vec3::Zero(); }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override {
-    state_ = State{};
-    rest_.reset();
-  }
   std::string_view name() const override { return "complementary"; }
 
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override {
+    state_ = State{};
+    rest_.reset();
+  }
 
   Params params_;
   Coefficients coeff_;

@@ -50,7 +50,7 @@ struct SplitKalman {
 class DlkfFilter final : public OrientationFilter {
  public:
   /// Own fields below; R-adaption (its reference is the field at initialisation), rest flag and timing come from
-  /// the base structs (documented there). max_gap_s must be <= 60 s.
+  /// the base structs (documented there). max_gap_s must be <= 60 s. A restart after a gap keeps the low-pass bias.
   struct Params : RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
     /// Gyro noise density (global error, including scale and misalignment), rad/s per sqrt(Hz): the direction
     /// of each estimated vector diffuses with variance sigma_g^2 dt per step. Default 0.002, chosen with
@@ -93,8 +93,6 @@ class DlkfFilter final : public OrientationFilter {
     double inv_tau_dist = 0.0;
     double acc_accept_min2 = 0.0;  ///< (max(g - acc_rejection_m_s2, 0))^2: |acc|^2 range of the R-adaption
     double acc_accept_max2 = 0.0;  ///< (g + acc_rejection_m_s2)^2
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
   };
 
   struct State {
@@ -105,9 +103,6 @@ class DlkfFilter final : public OrientationFilter {
     Quat q = Quat::Identity();             ///< TRIAD result, sensor-to-earth
     Vec3 gyr_prev = Vec3::Zero();
     bool have_gyr_prev = false;
-    bool initialised = false;
-    std::uint64_t last_ns = 0;
-    std::uint64_t init_ns = 0;
     FilterFlags flags;
     double decay_dt = -1.0;   ///< the step the two decay factors below were computed for, s (cache)
     double decay_ext = 0.0;   ///< exp(-dt / tau_ext_acc)
@@ -117,12 +112,9 @@ class DlkfFilter final : public OrientationFilter {
   explicit DlkfFilter(const Params& params);
   DlkfFilter() : DlkfFilter(Params{}) {}
 
-  UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return bias_.bias(); }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override;
   std::string_view name() const override { return "dlkf"; }
 
   /// Covariances of the two linear filters: [g_S, a_S] and [h_S, d_S].
@@ -136,7 +128,11 @@ class DlkfFilter final : public OrientationFilter {
   static Quat triad(const Vec3& up, const Vec3& field);
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override;
+  /// Clears everything but the bias low-pass.
+  void restart_keeping_bias();
   void initialise_magnetic(const Vec3& mag);
 
   Params params_;

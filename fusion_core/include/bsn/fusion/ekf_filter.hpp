@@ -24,7 +24,8 @@ class EkfFilter final : public OrientationFilter {
   using Mat6 = Eigen::Matrix<double, 6, 6>;
 
   /// Own fields below; initial covariance, R-adaption, rest flag and timing come from the base structs (documented
-  /// there). max_gap_s must be <= 60 s; a re-initialisation restarts the whole state.
+  /// there). max_gap_s must be <= 60 s. A restart after a gap keeps the bias and its covariance block (see
+  /// kalman_support::grow_over_gap).
   struct Params : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
     /// Gyro white noise, rad/s per sqrt(Hz): the rotation-angle variance grows by sigma_g^2 * dt per step.
     /// Default 1e-3 (Nez Table 3, slow).
@@ -42,8 +43,6 @@ class EkfFilter final : public OrientationFilter {
   struct Coefficients {
     double var_a = 0.0;  ///< sigma_a^2
     double var_m = 0.0;  ///< sigma_m^2
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
   };
 
   struct State {
@@ -54,21 +53,15 @@ class EkfFilter final : public OrientationFilter {
     MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
     Vec3 gyr_prev = Vec3::Zero();               ///< raw gyro reading of the previous sample, rad/s
     bool have_gyr_prev = false;
-    bool initialised = false;
-    std::uint64_t last_ns = 0;
-    std::uint64_t init_ns = 0;
     FilterFlags flags;
   };
 
   explicit EkfFilter(const Params& params);
   EkfFilter() : EkfFilter(Params{}) {}
 
-  UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return state_.bias; }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override;
   std::string_view name() const override { return "ekf"; }
 
   /// The filter's own 7x7 covariance of [q, b].
@@ -80,7 +73,9 @@ class EkfFilter final : public OrientationFilter {
   const State& state() const { return state_; }
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override;
   void set_reference(const Vec3& mag_earth);
   /// Kalman correction for a measurement whose Jacobian is [h_q 0]: it depends on the quaternion only.
   template <int M>

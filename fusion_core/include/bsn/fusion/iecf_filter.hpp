@@ -24,7 +24,7 @@ namespace bsn::fusion {
 class IecfFilter final : public OrientationFilter {
  public:
   /// Own fields below; the shared groups come from the base structs (documented there). init_period_s is also the
-  /// length of the start-up gain ramp; a re-initialisation after a gap keeps the bias estimate.
+  /// length of the start-up gain ramp.
   struct Params : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
     /// K: gain on the error after start-up, rad/s per unit error; the correction time constant is 1/K.
     /// Default 0.1 (10 s): the BROAD optimum (0.07-0.1 within 0.04 deg; Fan's 0.5 gives 4.4 deg instead of
@@ -38,21 +38,17 @@ class IecfFilter final : public OrientationFilter {
     double mag_rejection = 1.0;
   };
 
+  /// Quantities derived once from Params.
   struct Coefficients {
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
     /// The correction gain * e * dt stays below 1e150 rad per step: with a gyro step below that too, the update
     /// cannot overflow, and the detector need not be saved for a rollback.
     bool correction_bounded = true;
   };
 
   struct State {
-    Quat q = Quat::Identity();  ///< sensor-to-earth
-    bool initialised = false;
-    bool heading_known = false;  ///< false after an initialisation without magnetometer
-    std::uint64_t last_ns = 0;
+    Quat q = Quat::Identity();      ///< sensor-to-earth
+    bool heading_known = false;     ///< false after an initialisation without magnetometer
     std::uint64_t last_mag_ns = 0;  ///< last used magnetometer reading
-    std::uint64_t init_ns = 0;
     FilterFlags flags;
   };
 
@@ -63,19 +59,18 @@ class IecfFilter final : public OrientationFilter {
   /// Gain K at time since_init_s after (re)initialisation (the start-up ramp).
   double gain_at(double since_init_s) const;
 
-  UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return bias_.bias(); }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override;
   std::string_view name() const override { return use_magnetometer_ ? "iecf" : "iecf6"; }
 
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override;
 
   Params params_;
   bool use_magnetometer_;

@@ -7,6 +7,9 @@
 
 namespace bsn::fusion {
 
+/// A duration in seconds (how parameters give it) as nanoseconds (how samples are timed), rounded to the nearest.
+inline std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(s * 1e9)); }
+
 /// One MIMU sample in the sensor frame, SI units (see rotation.hpp for the frames).
 struct ImuSample {
   std::uint64_t timestamp_ns = 0;  ///< sensor clock, ns; filters take dt from consecutive timestamps

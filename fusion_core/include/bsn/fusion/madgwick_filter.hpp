@@ -39,19 +39,16 @@ class MadgwickFilter final : public OrientationFilter {
     double gyro_bias_lowpass = 1.0;
   };
 
+  /// Quantities derived once from Params.
   struct Coefficients {
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
+    bool bias_lowpass = true;  ///< gyro_bias_lowpass = 1
   };
 
   struct State {
-    Quat q = Quat::Identity();  ///< sensor-to-earth
-    bool initialised = false;
+    Quat q = Quat::Identity();      ///< sensor-to-earth
     Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, uT; turned into the current sensor frame
                                     ///< while a sample without magnetometer uses it
     std::uint64_t held_mag_ns = 0;  ///< its timestamp; 0 = none
-    std::uint64_t last_ns = 0;
-    std::uint64_t init_ns = 0;
     FilterFlags flags;
   };
 
@@ -70,19 +67,18 @@ class MadgwickFilter final : public OrientationFilter {
   /// Gradient J^T f of the (6D or 9D) objective, as (w, x, y, z); mag_unit ignored when use_mag is false.
   static Eigen::Vector4d gradient(const Quat& q, const Vec3& acc_unit, const Vec3& mag_unit, bool use_mag);
 
-  UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return bias_.bias(); }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override;
   std::string_view name() const override { return use_magnetometer_ ? "madgwick" : "madgwick6"; }
 
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override;
 
   Params params_;
   bool use_magnetometer_;

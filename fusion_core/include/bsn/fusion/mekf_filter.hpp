@@ -70,7 +70,8 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg);
 class MekfFilter final : public OrientationFilter {
  public:
   /// Own fields below (the adaptive variant's at the end); initial covariance, R-adaption, rest flag and timing come
-  /// from the base structs (documented there). max_gap_s must be <= 60 s.
+  /// from the base structs (documented there). max_gap_s must be <= 60 s. A restart after a gap keeps the bias and
+  /// its covariance block (see kalman_support::grow_over_gap) and starts again from the preset's noise set.
   struct Params : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
     /// Table 3 set used for Q and R: 0 static, 1 slow, 2 intermediate, 3 fast. Default 3 (fast): measured on the
     /// eight BROAD trials (mean total RMSE 3.7 deg; intermediate 12.3 deg, slow 55 deg, static 74 deg). Table 3 was
@@ -118,8 +119,6 @@ class MekfFilter final : public OrientationFilter {
 
   struct Coefficients {
     MekfNoise noise;  ///< the fixed set (non-adaptive) or the starting set (adaptive)
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
     std::uint64_t intensity_hold_ns = 0;
     std::uint64_t min_switch_interval_ns = 0;
     std::uint64_t switch_confirm_ns = 0;
@@ -135,10 +134,7 @@ class MekfFilter final : public OrientationFilter {
     bool have_w_prev = false;
     Vec3 h_ref = Vec3::Zero();                  ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
     MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
-    bool initialised = false;
-    std::uint64_t last_ns = 0;
-    std::uint64_t init_ns = 0;
-    int intensity = 1;  ///< index into kNezTable3 in use
+    int intensity = 1;                          ///< index into kNezTable3 in use
     std::uint64_t last_switch_ns = 0;
     std::array<std::uint64_t, 4> class_seen_ns{};  ///< last time each intensity class was observed
     std::array<bool, 4> class_seen{};
@@ -153,12 +149,9 @@ class MekfFilter final : public OrientationFilter {
   MekfFilter(const Params& params, bool adaptive);
   MekfFilter() : MekfFilter(Params{}, false) {}
 
-  UpdateResult update(const ImuSample& sample) override;
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return state_.bias; }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override;
   std::string_view name() const override { return adaptive_ ? "mekf_adaptive" : "mekf"; }
 
   /// Error-state covariance of [dtheta (sensor frame, rad), db (rad/s)].
@@ -171,7 +164,9 @@ class MekfFilter final : public OrientationFilter {
   const State& state() const { return state_; }
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override;
   void set_reference(const Vec3& mag_earth);
   int classify(const ImuSample& s) const;
   void adapt(const ImuSample& s);

@@ -1,8 +1,10 @@
-// The interface every orientation filter implements, and the factory that makes one from a name and
-// parameters (the body model's per-segment `filter:` block).
+// The interface every orientation filter implements, the skeleton of update() they share, and the registry that
+// makes one from a name and parameters (the body model's per-segment `filter:` block).
 #pragma once
 
+#include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -11,6 +13,8 @@
 #include "bsn/fusion/imu_sample.hpp"
 
 namespace bsn::fusion {
+
+struct FilterTimingParams;
 
 /// Why the filter did what it did at the last update.
 struct FilterFlags {
@@ -27,13 +31,40 @@ enum class UpdateResult {
                  ///< or no accelerometer to initialise from)
 };
 
+/// The timing state every filter keeps; OrientationFilter holds it and advances it.
+struct FilterClock {
+  bool initialised = false;   ///< the filter has an orientation
+  std::uint64_t last_ns = 0;  ///< timestamp of the last used sample
+  std::uint64_t init_ns = 0;  ///< timestamp of the last (re)initialisation
+};
+
 class OrientationFilter {
  public:
   virtual ~OrientationFilter() = default;
 
-  /// Feeds one sample. Non-finite input or a timestamp that does not advance is rejected without touching
-  /// the state.
-  virtual UpdateResult update(const ImuSample& sample) = 0;
+  /// Feeds one sample, in this order:
+  ///  - a non-finite sample (ImuSample::finite()) is rejected without touching the state;
+  ///  - the first usable sample initialises the orientation from start_orientation() (kInitialised);
+  ///  - a timestamp that does not advance is rejected without touching the state;
+  ///  - the gap rule: after a gap longer than max_gap_s the orientation restarts from the sample as at the first
+  ///    one (kInitialised, flags().reinitialised), and the gyro bias estimate is KEPT: the bias belongs to the
+  ///    sensor, which a gap does not change, while the orientation may have moved unobserved;
+  ///  - otherwise the state advances by dt = the time since the last used sample (kUpdated).
+  UpdateResult update(const ImuSample& sample) {
+    if (!sample.finite()) return UpdateResult::kRejected;
+    if (clock_.initialised) {
+      if (sample.timestamp_ns <= clock_.last_ns) return UpdateResult::kRejected;
+      const std::uint64_t dt_ns = sample.timestamp_ns - clock_.last_ns;
+      if (dt_ns <= max_gap_ns_) {
+        const UpdateResult result = step(sample, static_cast<double>(dt_ns) * 1e-9);
+        if (result == UpdateResult::kUpdated) clock_.last_ns = sample.timestamp_ns;
+        return result;
+      }
+    }
+    const UpdateResult result = start(sample);
+    if (result == UpdateResult::kInitialised) clock_ = {true, sample.timestamp_ns, sample.timestamp_ns};
+    return result;
+  }
 
   /// Sensor-to-earth orientation after the last update (identity before the first).
   virtual Quat orientation() const = 0;
@@ -44,13 +75,42 @@ class OrientationFilter {
   virtual Vec3 gyro_bias() const = 0;
 
   /// True once the filter has an orientation.
-  virtual bool initialised() const = 0;
+  bool initialised() const { return clock_.initialised; }
 
-  /// Forgets the state; the next usable sample initialises again.
-  virtual void reset() = 0;
+  /// Forgets the whole state, the gyro bias estimate too; the next usable sample initialises again.
+  void reset() {
+    clock_ = FilterClock{};
+    clear();
+  }
 
-  /// Registered factory name, e.g. "complementary".
+  /// Registered name, e.g. "complementary".
   virtual std::string_view name() const = 0;
+
+  const FilterClock& clock() const { return clock_; }
+
+ protected:
+  /// Checks the timing parameters (std::invalid_argument naming `filter`) and keeps them in ns.
+  OrientationFilter(std::string_view filter, const FilterTimingParams& timing);
+
+  /// (Re)initialises from the sample: orientation and everything tied to it, never the gyro bias estimate (the gap
+  /// rule). initialised() tells a restart after a gap (true) from the first start (false). Returns kInitialised, or
+  /// kRejected with the state unchanged when the sample cannot give an orientation.
+  virtual UpdateResult start(const ImuSample& sample) = 0;
+  /// Advances the state by dt_s (0 < dt_s <= max_gap_s) with the sample; clock() still holds the previous sample's
+  /// time. Returns kUpdated, or kRejected with the state unchanged.
+  virtual UpdateResult step(const ImuSample& sample, double dt_s) = 0;
+  /// Clears the filter's own state, the gyro bias estimate included (reset()).
+  virtual void clear() = 0;
+
+  /// True within init_period_s of the last (re)initialisation.
+  bool within_init_period(std::uint64_t t_ns) const { return t_ns - clock_.init_ns < init_period_ns_; }
+  std::uint64_t max_gap_ns() const { return max_gap_ns_; }
+  std::uint64_t init_period_ns() const { return init_period_ns_; }
+
+ private:
+  FilterClock clock_;
+  std::uint64_t max_gap_ns_ = 0;
+  std::uint64_t init_period_ns_ = 0;
 };
 
 /// A filter's name and parameter overrides (name -> value, SI units as each filter documents).
@@ -58,6 +118,16 @@ struct FilterSpec {
   std::string name = "seel_ruppin";  ///< the default: the most accurate on the BROAD recordings
   std::vector<std::pair<std::string, double>> parameters;
 };
+
+/// One registered filter.
+struct FilterInfo {
+  const char* name;
+  bool six_d_only;  ///< never uses the magnetometer after the start (which may take its heading from it)
+  std::unique_ptr<OrientationFilter> (*make)(const FilterSpec&);  ///< throws as make_filter() does
+};
+
+/// Every filter the body model can name, in the order filter_names() lists them.
+std::span<const FilterInfo> filter_registry();
 
 /// Names make_filter accepts.
 std::vector<std::string> filter_names();

@@ -21,9 +21,8 @@ namespace bsn::fusion {
 class SeelRuppinFilter final : public OrientationFilter {
  public:
   /// Own fields below; the shared groups come from the base structs (documented there). The bias low-pass acts
-  /// only with rest_bias_lowpass = 1. A re-initialisation after a gap resets the orientation only (the bias
-  /// belongs to the sensor). During the start-up period (init_period_s) the filter corrects the tilt without the
-  /// clip and the heading with tau_acc if that is shorter than tau_mag, and learns no bias.
+  /// only with rest_bias_lowpass = 1. During the start-up period (init_period_s) the filter corrects the tilt without
+  /// the clip and the heading with tau_acc if that is shorter than tau_mag, and learns no bias.
   struct Params : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
     /// tau_acc: half-value time of the convergence towards the accelerometer's inclination, s. Larger trusts
     /// the gyro longer, smaller removes tilt drift faster. With the acceleration low-pass on (the default) the
@@ -81,8 +80,6 @@ class SeelRuppinFilter final : public OrientationFilter {
     double tau_start_mag_14 = 0.0;  ///< 1.4 min(tau_mag, tau_acc): the heading correction during the start-up, s
     double bias_factor_acc = 0.0;   ///< zeta^2 / (160 tau_acc), 1/s
     double bias_factor_mag = 0.0;   ///< zeta^2 / (160 tau_mag), 1/s
-    std::uint64_t max_gap_ns = 0;
-    std::uint64_t init_period_ns = 0;
     std::uint64_t mag_reference_ns = 0;
     std::uint64_t mag_max_rejection_ns = 0;
     bool acc_clip_test = false;      ///< max_acc_error_rad < pi: clipping can be decided without atan2
@@ -103,12 +100,9 @@ class SeelRuppinFilter final : public OrientationFilter {
     double acc_lp_warmup_s = 0.0;     ///< time the low-pass has run; below tau it outputs the running mean
     double acc_lp_count = 0.0;        ///< samples in the running mean
     Vec3 acc_lp_mean = Vec3::Zero();  ///< running mean of the start-up, inertial frame, m/s^2
-    bool initialised = false;
-    bool heading_known = false;     ///< false after an initialisation without magnetometer
-    std::uint64_t last_ns = 0;      ///< timestamp of the last used sample
-    std::uint64_t last_mag_ns = 0;  ///< timestamp of the last used magnetometer reading
-    std::uint64_t init_ns = 0;      ///< timestamp of the last (re)initialisation
-    bool mag_learning = true;       ///< averaging the reference field for the disturbance detector
+    bool heading_known = false;       ///< false after an initialisation without magnetometer
+    std::uint64_t last_mag_ns = 0;    ///< timestamp of the last used magnetometer reading
+    bool mag_learning = true;         ///< averaging the reference field for the disturbance detector
     std::uint64_t mag_learning_since_ns = 0;
     double mag_norm_sum = 0.0;  ///< uT, over the readings of the learning period
     double mag_dip_sum = 0.0;   ///< rad
@@ -123,14 +117,11 @@ class SeelRuppinFilter final : public OrientationFilter {
   explicit SeelRuppinFilter(const Params& params);
   SeelRuppinFilter() : SeelRuppinFilter(Params{}) {}
 
-  /// Besides the interface's rejections, a sample with a value no sensor can produce (|acc| > 1e4 m/s^2,
-  /// |gyr| > 1e4 rad/s, |mag| > 1e5 uT) is rejected without touching the state.
-  UpdateResult update(const ImuSample& sample) override;
+  // Besides the interface's rejections, update() rejects a sample with a value no sensor can produce (|acc| > 1e4
+  // m/s^2, |gyr| > 1e4 rad/s, |mag| > 1e5 uT) without touching the state.
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return state_.gyro_bias; }
-  bool initialised() const override { return state_.initialised; }
-  void reset() override;
   std::string_view name() const override { return "seel_ruppin"; }
 
   const Params& params() const { return params_; }
@@ -138,7 +129,9 @@ class SeelRuppinFilter final : public OrientationFilter {
   const State& state() const { return state_; }
 
  private:
-  UpdateResult initialise(const ImuSample& s);
+  UpdateResult start(const ImuSample& s) override;
+  UpdateResult step(const ImuSample& s, double dt) override;
+  void clear() override;
   void correct_acc(const Vec3& acc, double dt);
   void correct_mag(const ImuSample& s);
   /// Starts learning the detector's reference field at t_ns.
