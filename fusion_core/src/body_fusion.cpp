@@ -7,8 +7,6 @@
 namespace bsn::fusion {
 namespace {
 
-std::uint64_t seconds_to_ns(double s) { return static_cast<std::uint64_t>(std::llround(std::max(0.0, s) * 1e9)); }
-
 // u = H (raw - B) on every calibrated channel that the sample carries.
 void apply_calibration(const calib::SensorCalibration& c, ImuSample& s) {
   if (c.accelerometer && s.has_acc) s.acc = calib::apply(*c.accelerometer, s.acc);
@@ -20,8 +18,8 @@ void apply_calibration(const calib::SensorCalibration& c, ImuSample& s) {
 
 BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const Params& params, std::uint64_t start_ns)
     : body_(std::move(body)),
-      stale_timeout_ns_(seconds_to_ns(params.stale_timeout_s)),
-      discovery_end_ns_(start_ns + seconds_to_ns(params.discovery_grace_s)),
+      stale_timeout_ns_(seconds_to_ns(std::max(0.0, params.stale_timeout_s))),
+      discovery_end_ns_(start_ns + seconds_to_ns(std::max(0.0, params.discovery_grace_s))),
       segments_(body_.segments.size()) {
   turned_stale_.reserve(segments_.size());
   for (std::size_t i = 0; i < segments_.size(); ++i) {
