@@ -5,7 +5,7 @@
 #include "demo_command.hpp"
 #include "echo_command.hpp"
 #include "eval_command.hpp"
-#include "fusion_command.hpp"
+#include "fusion_service.hpp"
 #include "sim_node.hpp"
 
 int main(int argc, char** argv) {

@@ -1,4 +1,4 @@
-// The fusion service: raw samples in over DDS, BodyFusion, orientations, joint angles and status out.
+// The fusion service (`bsn fusion`): raw samples in over DDS, BodyFusion, orientations, joint angles and status out.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +9,7 @@
 
 #include "bsn/dds/participant.hpp"
 #include "bsn/fusion/body_fusion.hpp"
+#include "command.hpp"
 
 namespace bsn::services {
 
@@ -49,5 +50,8 @@ class FusionService {
   bsn::Orientation orientation_msg_;
   bsn::JointAngles joint_msg_;
 };
+
+/// `bsn fusion`: its options and what runs it.
+Command fusion_command();
 
 }  // namespace bsn::services
