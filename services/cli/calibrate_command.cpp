@@ -1,5 +1,3 @@
-#include "calibrate_command.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -12,7 +10,9 @@
 #include "bsn/calib/pose_segmentation.hpp"
 #include "bsn/config/calibration_file.hpp"
 #include "bsn/fusion/rotation.hpp"
+#include "bsn/io/json.hpp"
 #include "bsn/io/recording.hpp"
+#include "tools.hpp"
 
 namespace bsn::services {
 namespace {
@@ -34,25 +34,12 @@ struct CalibrateOptions {
 using calib::FieldCalibration;
 using calib::Points3;
 
-std::string number(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
+using io::json_string;
+// Calibration parameters keep 10 significant digits: they are applied to raw readings.
+std::string number(double v) { return io::json_number(v, 10); }
 
 std::string json_vector(const calib::Vec3& v) {
   return "[" + number(v.x()) + ", " + number(v.y()) + ", " + number(v.z()) + "]";
-}
-
-std::string json_string(const std::string& s) {
-  std::string out = "\"";
-  for (const char c : s) {
-    if (c == '"' || c == '\\') out += '\\';
-    if (static_cast<unsigned char>(c) < 0x20) continue;
-    out += c;
-  }
-  return out + "\"";
 }
 
 std::string json_quality(const calib::FitQuality& q) {

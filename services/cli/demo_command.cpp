@@ -1,5 +1,3 @@
-#include "demo_command.hpp"
-
 #include <unistd.h>
 
 #include <chrono>
@@ -17,6 +15,7 @@
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/logging/log.hpp"
 #include "format.hpp"
+#include "tools.hpp"
 
 namespace bsn::services {
 namespace {

@@ -1,5 +1,3 @@
-#include "echo_command.hpp"
-
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -9,6 +7,7 @@
 
 #include "bsn/dds/shutdown.hpp"
 #include "format.hpp"
+#include "tools.hpp"
 
 namespace bsn::services {
 namespace {

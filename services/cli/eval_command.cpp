@@ -1,5 +1,3 @@
-#include "eval_command.hpp"
-
 #include <unistd.h>
 
 #include <algorithm>
@@ -11,6 +9,7 @@
 
 #include "bsn/eval/evaluation.hpp"
 #include "bsn/io/recording.hpp"
+#include "tools.hpp"
 
 namespace bsn::services {
 namespace {

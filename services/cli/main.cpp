@@ -1,12 +1,9 @@
 // `bsn`: one program, one subcommand per process role (like git). Each command registers its options next to
 // its run function; this list is the only place that names them all.
-#include "calibrate_command.hpp"
 #include "command.hpp"
-#include "demo_command.hpp"
-#include "echo_command.hpp"
-#include "eval_command.hpp"
 #include "fusion_service.hpp"
 #include "sim_node.hpp"
+#include "tools.hpp"
 
 int main(int argc, char** argv) {
   using namespace bsn::services;

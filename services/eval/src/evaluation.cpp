@@ -8,34 +8,15 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "bsn/io/json.hpp"
+
 namespace bsn::eval {
 namespace {
 
 constexpr double kDeg = 180.0 / std::numbers::pi;
 
-std::string json_string(const std::string& s) {
-  std::string out = "\"";
-  for (const char c : s) {
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", c);
-      out += buf;
-    } else {
-      out += c;
-    }
-  }
-  return out + "\"";
-}
-
-std::string json_number(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.6g", v);
-  return buf;
-}
+using io::json_number;
+using io::json_string;
 
 std::string angles_json(const fusion::ErrorAngles& e) {
   return "\"total_rmse_deg\": " + json_number(e.total * kDeg) +
