@@ -28,20 +28,21 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
     segments_[i].gate = SampleGate(params.gate);
     if (const auto c = calibrations.find(spec.node); c != calibrations.end()) segments_[i].calibration = c->second;
     segments_[i].parent = body_.find_segment(spec.parent);
+    segment_of_node_.emplace(spec.node, i);
   }
 }
 
 const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arrival_ns) {
   SampleResult& r = result_ = SampleResult{};
-  const std::optional<std::size_t> index = body_.find_node(in.node);
-  if (!index) {
+  const auto index = segment_of_node_.find(in.node);
+  if (index == segment_of_node_.end()) {
     ++unknown_node_samples_;
     r.new_unknown_node = unknown_nodes_.size() < kMaxUnknownNodesListed &&
                          std::find(unknown_nodes_.begin(), unknown_nodes_.end(), in.node) == unknown_nodes_.end();
     if (r.new_unknown_node) unknown_nodes_.emplace_back(in.node);
     return r;
   }
-  r.segment = *index;
+  r.segment = index->second;
   Segment& seg = segments_[r.segment];
   seg.last_arrival_ns = arrival_ns;
   r.node_fresh = std::exchange(seg.stale, false);

@@ -13,12 +13,6 @@ std::optional<std::size_t> BodyModel::find_segment(const std::string& n) const {
   return std::nullopt;
 }
 
-std::optional<std::size_t> BodyModel::find_node(std::string_view node) const {
-  for (std::size_t i = 0; i < segments.size(); ++i)
-    if (segments[i].node == node) return i;
-  return std::nullopt;
-}
-
 std::optional<BodyModelProblem> check_body_model(const BodyModel& body) {
   if (body.segments.empty()) return BodyModelProblem{0, "the body model has no segments"};
   std::unordered_map<std::string, std::size_t> by_name, by_node;

@@ -3,7 +3,9 @@
 // (clock reset, node stale or fresh, a new unknown node) comes back as events.
 #pragma once
 
+#include <functional>
 #include <span>
+#include <string_view>
 #include <unordered_map>
 
 #include "bsn/calib/sensor_calibration.hpp"
@@ -89,6 +91,12 @@ class BodyFusion {
   BodyModel body_;
   std::uint64_t stale_timeout_ns_, discovery_end_ns_;
   std::vector<Segment> segments_;
+  // Node id -> segment index, looked up with the sample's string_view: one hash per sample, no allocation.
+  struct NodeHash {
+    using is_transparent = void;
+    std::size_t operator()(std::string_view node) const { return std::hash<std::string_view>{}(node); }
+  };
+  std::unordered_map<std::string, std::size_t, NodeHash, std::equal_to<>> segment_of_node_;
   std::uint64_t unknown_node_samples_ = 0;
   std::vector<std::string> unknown_nodes_;
   SampleResult result_;

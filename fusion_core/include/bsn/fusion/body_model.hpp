@@ -5,7 +5,6 @@
 #include <cstddef>
 #include <optional>
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include "bsn/fusion/orientation_filter.hpp"
@@ -28,8 +27,6 @@ struct BodyModel {
 
   /// Index of a segment by name, or nullopt.
   std::optional<std::size_t> find_segment(const std::string& name) const;
-  /// Index of the segment carrying a node, or nullopt.
-  std::optional<std::size_t> find_node(std::string_view node) const;
 };
 
 /// What is wrong with a body model, and which segment entry shows it.
