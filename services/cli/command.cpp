@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/logging/log.hpp"
@@ -74,6 +75,19 @@ void add_domain_option(CLI::App* command, int& domain) {
   domain = dds::default_domain();
   command->add_option("--domain", domain, "DDS domain id, 0..232 (default: $BSN_DOMAIN or 0)")
       ->check(CLI::Range(0, 232));
+  // Both go into the environment, where the participant reads them, so children (bsn demo's) inherit them.
+  command
+      ->add_option_function<std::string>(
+          "--profile", [](const std::string& file) { ::setenv("FASTRTPS_DEFAULT_PROFILES_FILE", file.c_str(), 1); },
+          "Fast DDS XML profiles file, e.g. share/bsn/profiles/discovery-client.xml (default: "
+          "$FASTRTPS_DEFAULT_PROFILES_FILE; none: UDP with multicast discovery)")
+      ->check(CLI::ExistingFile);
+  command
+      ->add_option_function<std::string>(
+          "--security", [](const std::string& dir) { ::setenv("BSN_SECURITY_DIR", dir.c_str(), 1); },
+          "DDS-Security identity folder made by deploy/security/make-pki.sh (ca.pem, cert.pem, key.pem, "
+          "governance.p7s, permissions.p7s) (default: $BSN_SECURITY_DIR; none: the network is open)")
+      ->check(CLI::ExistingDirectory);
 }
 
 DdsCommandFrame::Handlers::Handlers() { dds::install_shutdown_handlers(); }

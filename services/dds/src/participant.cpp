@@ -4,6 +4,8 @@
 
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <filesystem>
+#include <mutex>
 #include <stdexcept>
 
 #include "bsn/logging/log.hpp"
@@ -54,13 +56,57 @@ class ReaderEvents final : public DataReaderListener {
   std::shared_ptr<EndpointEvents> events_;
 };
 
+// DDS-Security from an identity folder of deploy/security/make-pki.sh: PKI-DH authentication, access control
+// by the signed governance and permissions, AES-GCM-GMAC encryption.
+void add_security(DomainParticipantQos& qos, const std::string& dir) {
+  auto file_uri = [&dir](const char* file) {
+    const std::filesystem::path path = std::filesystem::absolute(std::filesystem::path(dir) / file);
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) {
+      throw std::runtime_error("security folder " + dir + " has no " + file +
+                               " (make one with deploy/security/make-pki.sh)");
+    }
+    return "file://" + path.string();
+  };
+  auto& properties = qos.properties().properties();
+  auto set = [&properties](const char* key, std::string value) { properties.emplace_back(key, std::move(value)); };
+  set("dds.sec.auth.plugin", "builtin.PKI-DH");
+  set("dds.sec.auth.builtin.PKI-DH.identity_ca", file_uri("ca.pem"));
+  set("dds.sec.auth.builtin.PKI-DH.identity_certificate", file_uri("cert.pem"));
+  set("dds.sec.auth.builtin.PKI-DH.private_key", file_uri("key.pem"));
+  set("dds.sec.access.plugin", "builtin.Access-Permissions");
+  set("dds.sec.access.builtin.Access-Permissions.permissions_ca", file_uri("ca.pem"));
+  set("dds.sec.access.builtin.Access-Permissions.governance", file_uri("governance.p7s"));
+  set("dds.sec.access.builtin.Access-Permissions.permissions", file_uri("permissions.p7s"));
+  set("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
+}
+
 DomainParticipantQos participant_qos(const std::string& name) {
   // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies; the
   // factory reads the profiles lazily, so load them before asking for the default.
+  // load_profiles() ignores a file that does not parse; loading it explicitly first reports that (and the
+  // factory then skips the file it has already parsed).
+  const char* profile = std::getenv("FASTRTPS_DEFAULT_PROFILES_FILE");
+  if (profile && *profile &&
+      DomainParticipantFactory::get_instance()->load_XML_profiles_file(profile) != ReturnCode_t::RETCODE_OK) {
+    throw std::runtime_error(std::string("cannot load the Fast DDS profiles file ") + profile +
+                             " (see the XMLPARSER errors above)");
+  }
   DomainParticipantFactory::get_instance()->load_profiles();
   DomainParticipantQos qos = DomainParticipantFactory::get_instance()->get_default_participant_qos();
   qos.name(name);
-  if (std::getenv("FASTRTPS_DEFAULT_PROFILES_FILE") == nullptr) {
+  const char* security = std::getenv("BSN_SECURITY_DIR");
+  if (security && *security) {
+    add_security(qos, security);
+  } else {
+    static std::once_flag said_open;
+    std::call_once(said_open, [] {
+      logging::log_info(
+          "DDS-Security is off: any participant on this network can read and publish bsn topics "
+          "(see README, deployment: --security DIR)");
+    });
+  }
+  if (profile == nullptr || *profile == '\0') {
     // UDPv4 only, unless a profile says otherwise. Fast DDS 2.9.1 sends every BEST_EFFORT sample over both
     // shared memory and UDP (fixed in 2.9.2), and shared memory leaves files in /dev/shm when a process is
     // killed. On loopback UDP costs a few microseconds, far below a 10 ms sample period.
@@ -72,6 +118,14 @@ DomainParticipantQos participant_qos(const std::string& name) {
     qos.transport().user_transports.push_back(udp);
   }
   return qos;
+}
+
+/// The likely reason an endpoint could not be created when DDS-Security is on.
+std::string refused_by_permissions() {
+  const char* security = std::getenv("BSN_SECURITY_DIR");
+  if (!security || !*security) return "";
+  return std::string(": the permissions of the identity in ") + security +
+         " may not allow it (its role's topics: README, deployment)";
 }
 
 }  // namespace
@@ -129,7 +183,7 @@ DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, Top
   events->mismatch_counter = &qos_mismatches_;
   auto listener = std::make_unique<WriterEvents>(events);
   DataWriter* w = publisher_->create_datawriter(topic, qos, listener.get(), StatusMask::all());
-  if (!w) throw std::runtime_error("cannot create a DDS writer on " + topic->get_name());
+  if (!w) throw std::runtime_error("cannot create a DDS writer on " + topic->get_name() + refused_by_permissions());
   std::lock_guard lock(mutex_);
   writer_listeners_.push_back(std::move(listener));
   return w;
@@ -144,7 +198,7 @@ void Participant::create_reader(eprosima::fastdds::dds::Topic* topic, TopicQos d
   events->mismatch_counter = &qos_mismatches_;
   auto listener = std::make_unique<ReaderEvents>(events);
   DataReader* r = subscriber_->create_datareader(topic, qos, listener.get(), StatusMask::all());
-  if (!r) throw std::runtime_error("cannot create a DDS reader on " + topic->get_name());
+  if (!r) throw std::runtime_error("cannot create a DDS reader on " + topic->get_name() + refused_by_permissions());
   std::lock_guard lock(mutex_);
   reader_listeners_.push_back(std::move(listener));
   readers_.push_back(r);

@@ -1,0 +1,139 @@
+#!/usr/bin/env bash
+# Makes a DDS-Security PKI for bsn with openssl: one certificate authority, one identity per process, and the
+# governance and permissions documents signed by that authority.
+#
+#   deploy/security/make-pki.sh OUT_DIR [NAME:ROLE ...]
+#
+# ROLE is one of
+#   sensor       publishes bsn/raw (and bsn/truth/orientation, for simulators)
+#   fusion       reads raw, calibration results and status; publishes orientation, joint angles, status
+#   calibration  reads raw and calibration requests; publishes calibration results and progress
+#   viewer       reads orientation, joint angles, status (and the simulator's truth)
+#   operator     a calibration client: publishes requests; reads progress, results and status
+#   recorder     reads every bsn topic
+# Without NAME:ROLE arguments it makes one identity per role, named after the role. Each identity gets a folder
+# OUT_DIR/NAME holding what `bsn ... --security OUT_DIR/NAME` reads: ca.pem, cert.pem, key.pem, governance.p7s,
+# permissions.p7s. OUT_DIR/ca holds the authority's key: keep it off the lab machines. Running the script again
+# with new identities keeps the existing authority and re-signs the permissions for all of them.
+set -euo pipefail
+
+usage() { sed -n '2,20p' "$0" | sed 's/^# \{0,1\}//'; }
+if [ $# -lt 1 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then usage; exit 2; fi
+out=$1; shift
+identities=("$@")
+[ ${#identities[@]} -gt 0 ] || identities=(sensor:sensor fusion:fusion calibration:calibration viewer:viewer
+                                            operator:operator recorder:recorder)
+command -v openssl >/dev/null || { echo "make-pki: error: openssl is not installed (apt install openssl)" >&2; exit 1; }
+
+# Topics each role may publish and subscribe to (DDS topic names; permissions list them literally).
+role_topics() {  # role -> "publish|subscribe", space-separated topic lists
+  case $1 in
+    sensor)      echo "bsn/raw bsn/truth/orientation|" ;;
+    fusion)      echo "bsn/orientation bsn/joint_angles bsn/status|bsn/raw bsn/calibration/result bsn/status" ;;
+    calibration) echo "bsn/calibration/result bsn/calibration/progress bsn/status|bsn/raw bsn/calibration/request" ;;
+    viewer)      echo "|bsn/orientation bsn/joint_angles bsn/status bsn/truth/orientation" ;;
+    operator)    echo "bsn/calibration/request|bsn/calibration/progress bsn/calibration/result bsn/status" ;;
+    recorder)    echo "|bsn/*" ;;
+    *) return 1 ;;
+  esac
+}
+
+for id in "${identities[@]}"; do
+  name=${id%%:*}; role=${id#*:}
+  if [ "$name" = "$id" ] || ! [[ $name =~ ^[A-Za-z0-9_.-]+$ ]] || [ "$name" = ca ]; then
+    echo "make-pki: error: '$id' is not NAME:ROLE (NAME of letters, digits, '_', '.', '-', not 'ca')" >&2; exit 2
+  fi
+  role_topics "$role" >/dev/null || { echo "make-pki: error: unknown role '$role' in '$id'" >&2; exit 2; }
+done
+
+mkdir -p "$out/ca"
+ca_key=$out/ca/ca_key.pem ca_cert=$out/ca/ca.pem
+if [ ! -f "$ca_key" ]; then
+  openssl ecparam -name prime256v1 -genkey -noout -out "$ca_key"
+  # DDS-Security checks the authority's certificate for digitalSignature, since it signs the documents too.
+  openssl req -x509 -new -key "$ca_key" -sha256 -days 3650 -subj "/O=bsn/CN=bsn authority" -out "$ca_cert" \
+    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign,digitalSignature"
+  chmod 600 "$ca_key"
+fi
+
+domains="<domains><id_range><min>0</min><max>232</max></id_range></domains>"
+# Only authenticated participants join; discovery, liveliness and every payload are encrypted; each topic is
+# read- and write-controlled by the permissions below.
+cat > "$out/ca/governance.xml" <<XML
+<?xml version="1.0" encoding="UTF-8"?>
+<dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"
+     xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-Security/20170801/omg_shared_ca_domain_governance.xsd">
+  <domain_access_rules>
+    <domain_rule>
+      $domains
+      <allow_unauthenticated_participants>false</allow_unauthenticated_participants>
+      <enable_join_access_control>true</enable_join_access_control>
+      <discovery_protection_kind>ENCRYPT</discovery_protection_kind>
+      <liveliness_protection_kind>ENCRYPT</liveliness_protection_kind>
+      <rtps_protection_kind>NONE</rtps_protection_kind>
+      <topic_access_rules>
+        <topic_rule>
+          <topic_expression>*</topic_expression>
+          <enable_discovery_protection>true</enable_discovery_protection>
+          <enable_liveliness_protection>true</enable_liveliness_protection>
+          <enable_read_access_control>true</enable_read_access_control>
+          <enable_write_access_control>true</enable_write_access_control>
+          <metadata_protection_kind>ENCRYPT</metadata_protection_kind>
+          <data_protection_kind>ENCRYPT</data_protection_kind>
+        </topic_rule>
+      </topic_access_rules>
+    </domain_rule>
+  </domain_access_rules>
+</dds>
+XML
+
+topic_list() { local t; for t in $1; do printf '<topic>%s</topic>' "$t"; done; }
+
+# Identities made earlier stay in the permissions (their role is remembered in OUT_DIR/NAME/role).
+for id in "${identities[@]}"; do
+  name=${id%%:*}; role=${id#*:}
+  mkdir -p "$out/$name"; echo "$role" > "$out/$name/role"
+done
+
+{
+  echo '<?xml version="1.0" encoding="UTF-8"?>'
+  echo '<dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"'
+  echo '     xsi:noNamespaceSchemaLocation="http://www.omg.org/spec/DDS-Security/20170801/omg_shared_ca_permissions.xsd">'
+  echo '  <permissions>'
+  for dir in "$out"/*/; do
+    name=$(basename "$dir"); [ "$name" != ca ] && [ -f "$dir/role" ] || continue
+    role=$(cat "$dir/role"); topics=$(role_topics "$role")
+    pub=${topics%%|*}; sub=${topics#*|}
+    echo "    <grant name=\"$name\">"
+    echo "      <subject_name>CN=$name,O=bsn</subject_name>"
+    echo "      <validity><not_before>2020-01-01T00:00:00</not_before><not_after>2036-01-01T00:00:00</not_after></validity>"
+    echo "      <allow_rule>"
+    echo "        $domains"
+    [ -n "$pub" ] && echo "        <publish><topics>$(topic_list "$pub")</topics></publish>"
+    [ -n "$sub" ] && echo "        <subscribe><topics>$(topic_list "$sub")</topics></subscribe>"
+    echo "      </allow_rule>"
+    echo "      <default>DENY</default>"
+    echo "    </grant>"
+  done
+  echo '  </permissions>'
+  echo '</dds>'
+} > "$out/ca/permissions.xml"
+
+sign() { openssl smime -sign -text -in "$1" -out "$2" -signer "$ca_cert" -inkey "$ca_key"; }
+sign "$out/ca/governance.xml" "$out/ca/governance.p7s"
+sign "$out/ca/permissions.xml" "$out/ca/permissions.p7s"
+
+for dir in "$out"/*/; do
+  name=$(basename "$dir"); [ "$name" != ca ] && [ -f "$dir/role" ] || continue
+  if [ ! -f "$dir/key.pem" ]; then
+    openssl ecparam -name prime256v1 -genkey -noout -out "$dir/key.pem"
+    chmod 600 "$dir/key.pem"
+    openssl req -new -key "$dir/key.pem" -subj "/O=bsn/CN=$name" -out "$dir/cert.csr"
+    openssl x509 -req -in "$dir/cert.csr" -CA "$ca_cert" -CAkey "$ca_key" -CAcreateserial -sha256 -days 3650 \
+      -out "$dir/cert.pem" 2>/dev/null
+    rm -f "$dir/cert.csr"
+  fi
+  cp "$ca_cert" "$dir/ca.pem"
+  cp "$out/ca/governance.p7s" "$out/ca/permissions.p7s" "$dir/"
+done
+echo "make-pki: identities in $out: $(cd "$out" && for d in */; do [ -f "$d/role" ] && printf '%s(%s) ' "${d%/}" "$(cat "$d/role")"; done)"
