@@ -200,6 +200,10 @@ void ProcessTest::TearDown() {
 dds::ChildProcess& ProcessTest::spawn(const std::string& name, const std::vector<std::string>& args) {
   std::vector<std::string> argv{bsn_executable()};
   argv.insert(argv.end(), args.begin(), args.end());
+  return spawn_command(name, argv);
+}
+
+dds::ChildProcess& ProcessTest::spawn_command(const std::string& name, const std::vector<std::string>& argv) {
   children_.emplace_back(name, std::make_unique<dds::ChildProcess>(argv, log_path(name).string()));
   return *children_.back().second;
 }

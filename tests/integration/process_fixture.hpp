@@ -72,6 +72,8 @@ class ProcessTest : public ::testing::Test {
 
   /// Starts `bsn <args...>` with stdout and stderr to <dir>/<name>.log.
   dds::ChildProcess& spawn(const std::string& name, const std::vector<std::string>& args);
+  /// Starts any program (argv[0] an absolute path), stopped and logged like the others.
+  dds::ChildProcess& spawn_command(const std::string& name, const std::vector<std::string>& argv);
 
   /// SIGTERM, then SIGKILL after `grace`; returns the waitpid status.
   std::optional<int> stop(const std::string& name, std::chrono::milliseconds grace = std::chrono::milliseconds(5000));
