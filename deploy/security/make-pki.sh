@@ -11,6 +11,7 @@
 #   viewer       reads orientation, joint angles, status (and the simulator's truth)
 #   operator     a calibration client: publishes requests; reads progress, results and status
 #   recorder     reads every bsn topic
+#   tester       publishes raw samples and reads every bsn topic (for tests and benchmarks, not for a lab)
 # Without NAME:ROLE arguments it makes one identity per role, named after the role. Each identity gets a folder
 # OUT_DIR/NAME holding what `bsn ... --security OUT_DIR/NAME` reads: ca.pem, cert.pem, key.pem, governance.p7s,
 # permissions.p7s. OUT_DIR/ca holds the authority's key: keep it off the lab machines. Running the script again
@@ -34,6 +35,7 @@ role_topics() {  # role -> "publish|subscribe", space-separated topic lists
     viewer)      echo "|bsn/orientation bsn/joint_angles bsn/status bsn/truth/orientation" ;;
     operator)    echo "bsn/calibration/request|bsn/calibration/progress bsn/calibration/result bsn/status" ;;
     recorder)    echo "|bsn/*" ;;
+    tester)      echo "bsn/raw bsn/truth/orientation bsn/calibration/request|bsn/*" ;;
     *) return 1 ;;
   esac
 }

@@ -87,6 +87,7 @@ struct Options {
   std::string phases = "all";
   int refine = 2;
   std::uint64_t socket_buffer = 0;
+  std::string security;  ///< make-pki.sh output with identities `fusion` and `tester`; "" = security off
   bool quick = false;
   bool keep_logs = false;
   bool verbose = false;
@@ -470,6 +471,8 @@ struct RunResult {
 class Bench {
  public:
   Bench(const Options& opt, fs::path dir) : opt_(opt), dir_(std::move(dir)) {}
+  /// Later runs use DDS-Security: the fusion as ROOT/fusion, the bench's participant as ROOT/tester.
+  void set_security(std::string root) { security_root_ = std::move(root); }
 
   RunResult run(int n, double seconds) {
     RunResult r;
@@ -487,16 +490,18 @@ class Bench {
     // The fusion starts before the bench's participant exists: ChildProcess does not close inherited descriptors,
     // so a child forked later would hold the bench's DDS sockets open.
     try {
-      fusion = std::make_unique<dds::ChildProcess>(
-          std::vector<std::string>{opt_.bsn, "fusion", "--domain", std::to_string(opt_.domain), "--body", body_file},
-          log_file);
+      std::vector<std::string> argv{opt_.bsn, "fusion", "--domain", std::to_string(opt_.domain), "--body", body_file};
+      if (!security_root_.empty()) argv.insert(argv.end(), {"--security", security_root_ + "/fusion"});
+      fusion = std::make_unique<dds::ChildProcess>(argv, log_file);
     } catch (const std::exception& e) {
       r.error = std::string("cannot start bsn fusion: ") + e.what();
       return r;
     }
     status = std::make_unique<StatusView>(fusion->pid());
     {
+      if (!security_root_.empty()) setenv("BSN_SECURITY_DIR", (security_root_ + "/tester").c_str(), 1);
       dds::Participant participant({opt_.domain, "bsn bench e2e"});
+      unsetenv("BSN_SECURITY_DIR");
       auto orientation_reader = participant.make_reader(
           dds::kOrientationTopic, [&rx](const bsn::Orientation& o, const SampleInfo&) { rx.on_orientation(o); });
       auto status_reader = participant.make_reader(
@@ -764,6 +769,7 @@ class Bench {
 
   const Options& opt_;
   fs::path dir_;
+  std::string security_root_;
 };
 
 // ---------------------------------------------------------------------------------------------------------------
@@ -880,6 +886,10 @@ int main(int argc, char** argv) {
   app.add_option("--phases", opt.phases, "which phases to run")
       ->check(CLI::IsMember({"all", "latency", "capacity"}))
       ->capture_default_str();
+  app.add_option("--security", opt.security,
+                 "also run every phase with DDS-Security, from this deploy/security/make-pki.sh folder with "
+                 "identities fusion:fusion and tester:tester, and compare")
+      ->check(CLI::ExistingDirectory);
   app.add_flag("--quick", opt.quick,
                "smoke run: 3 s latency phase, 2 s steps up to 64 segments, no refinement, 0.5 s warm-up");
   app.add_flag("--keep-logs", opt.keep_logs, "keep the temporary folder with the body files and fusion logs");
@@ -942,129 +952,155 @@ int main(int argc, char** argv) {
 
   int exit_code = 0;
   Bench bench(opt, dir);
-  std::optional<RunResult> latency;
-  std::deque<RunResult> steps;         // stable addresses: failed and limited point into it
-  int largest = 0;                     // largest N verified without loss at the full rate
-  const RunResult* failed = nullptr;   // smallest N at which the fusion lost samples (or a run failed)
-  const RunResult* limited = nullptr;  // a step at which the bench itself was the bottleneck
-  auto step = [&](int n) -> const RunResult& {
-    std::printf("  N = %d ...\n", n);
-    std::fflush(stdout);
-    steps.push_back(bench.run(n, opt.step_seconds));
-    print_run_details(steps.back(), opt);
-    return steps.back();
+  struct Outcome {
+    std::optional<RunResult> latency;
+    int largest = 0;
   };
-  try {
-    if (opt.phases != "capacity") {
-      std::printf("\n== Phase 1: latency, %d segments at %.0f Hz for %.0f s ==\n", opt.latency_segments, opt.rate_hz,
-                  opt.latency_seconds);
+  // One latency phase and capacity sweep, with their summary; run twice (open, then secured) with --security.
+  auto measure = [&](const char* label) -> Outcome {
+    std::optional<RunResult> latency;
+    std::deque<RunResult> steps;         // stable addresses: failed and limited point into it
+    int largest = 0;                     // largest N verified without loss at the full rate
+    const RunResult* failed = nullptr;   // smallest N at which the fusion lost samples (or a run failed)
+    const RunResult* limited = nullptr;  // a step at which the bench itself was the bottleneck
+    auto step = [&](int n) -> const RunResult& {
+      std::printf("  N = %d ...\n", n);
       std::fflush(stdout);
-      latency = bench.run(opt.latency_segments, opt.latency_seconds);
-      print_run_details(*latency, opt);
-      if (!latency->pass) exit_code = 1;
-    }
-    if (opt.phases != "latency" && !bsn::dds::shutdown_requested()) {
-      std::printf("\n== Phase 2: capacity, N segments at %.0f Hz, %.0f s per step, fresh fusion process per step ==\n",
-                  opt.rate_hz, opt.step_seconds);
-      std::vector<int> ns;
-      for (int n : {7, 16}) ns.push_back(n);
-      for (int n = 32; n < opt.max_segments; n *= 2) ns.push_back(n);
-      std::erase_if(ns, [&](int n) { return n > opt.max_segments; });
-      if (ns.empty() || ns.back() != opt.max_segments) ns.push_back(opt.max_segments);
-      for (int n : ns) {
-        if (bsn::dds::shutdown_requested()) break;
-        const RunResult& r = step(n);
-        if (r.bench_limited()) {
-          limited = &r;
-          break;
-        }
-        if (!r.pass) {
-          failed = &r;
-          break;
-        }
-        largest = n;
+      steps.push_back(bench.run(n, opt.step_seconds));
+      print_run_details(steps.back(), opt);
+      return steps.back();
+    };
+    try {
+      if (opt.phases != "capacity") {
+        std::printf("\n== Phase 1: latency, %d segments at %.0f Hz for %.0f s ==\n", opt.latency_segments, opt.rate_hz,
+                    opt.latency_seconds);
+        std::fflush(stdout);
+        latency = bench.run(opt.latency_segments, opt.latency_seconds);
+        print_run_details(*latency, opt);
+        if (!latency->pass) exit_code = 1;
       }
-      // Bisect between the last pass and the first failure.
-      for (int i = 0; i < opt.refine && failed && largest > 0 && !bsn::dds::shutdown_requested(); ++i) {
-        const int mid = (largest + failed->n) / 2;
-        if (mid <= largest || mid >= failed->n) break;
-        std::printf("  refining between %d and %d:\n", largest, failed->n);
-        const RunResult& r = step(mid);
-        if (r.bench_limited()) {
-          limited = &r;
-          break;
-        }
-        if (r.pass) {
-          largest = mid;
-        } else {
-          failed = &r;
-        }
-      }
-    }
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "bsn_bench_e2e: error: %s\n", e.what());
-    exit_code = 1;
-  }
-
-  // Summary.
-  const double total_s = std::chrono::duration<double>(Clock::now() - started).count();
-  std::printf("\n---- summary ----\n");
-  std::printf("bsn_bench_e2e, %s, %s\n", utc_now().c_str(), host.c_str());
-  std::printf("command: %s\n", command.c_str());
-  std::printf(
-      "setup: Fast DDS 2.9.1 over UDPv4 on one host; one `bsn fusion` process; the bench publishes all N nodes (%s "
-      "pacing, %s body) and subscribes to bsn/orientation. %s.\n",
-      opt.pacing.c_str(), opt.topology.c_str(), buffers.c_str());
-  if (latency) {
-    const auto& r = *latency;
-    std::printf(
-        "latency, raw sample written -> orientation received, %d segments x %.0f Hz, %.0f s: median %s us, p90 %s "
-        "us, p99 %s us, max %s us (%llu sent, %llu received)%s\n",
-        r.n, opt.rate_hz, opt.latency_seconds, fmt("%.0f", r.latency.p50_us).c_str(),
-        fmt("%.0f", r.latency.p90_us).c_str(), fmt("%.0f", r.latency.p99_us).c_str(),
-        fmt("%.0f", r.latency.max_us).c_str(), static_cast<unsigned long long>(r.sent),
-        static_cast<unsigned long long>(r.received), r.pass ? "" : ("  FAILED: " + r.error).c_str());
-  }
-  if (!steps.empty()) {
-    std::printf("capacity at %.0f Hz per segment, %.0f s per step, no loss allowed:\n", opt.rate_hz, opt.step_seconds);
-    std::printf("  %6s %9s %9s %7s %8s %8s %9s %9s %9s %8s  %s\n", "N", "sent", "received", "lost", "p50 us", "p99 us",
-                "fusion %", "us/sample", "bench %", "pub Hz", "result");
-    std::vector<const RunResult*> sorted;
-    for (const auto& r : steps) sorted.push_back(&r);
-    std::stable_sort(sorted.begin(), sorted.end(), [](auto* a, auto* b) { return a->n < b->n; });
-    for (const RunResult* r : sorted) {
-      std::printf("  %6d %9llu %9llu %7lld %8s %8s %9s %9s %9s %8.1f  %s\n", r->n,
-                  static_cast<unsigned long long>(r->sent), static_cast<unsigned long long>(r->received),
-                  static_cast<long long>(r->sent) - static_cast<long long>(r->received),
-                  fmt("%.0f", r->latency.p50_us).c_str(), fmt("%.0f", r->latency.p99_us).c_str(),
-                  fmt("%.1f", r->fusion_cpu_pct).c_str(),
-                  fmt("%.1f", r->sent > 0 ? 1e6 * r->fusion_cpu_s / static_cast<double>(r->sent) : NAN).c_str(),
-                  fmt("%.1f", r->bench_cpu_pct).c_str(), r->achieved_rate_hz, verdict(*r));
-    }
-    std::printf("largest N with no loss at %.0f Hz: %d\n", opt.rate_hz, largest);
-    if (failed) {
-      std::printf("  first failing N = %d: %s\n", failed->n, failed->error.c_str());
-      if (failed->fusion_udp_drops.value_or(0) > 0) {
+      if (opt.phases != "latency" && !bsn::dds::shutdown_requested()) {
         std::printf(
-            "  the fusion's UDP receive socket overflowed (%llu datagrams dropped by the kernel) at %.0f %% CPU: the "
-            "limit is the socket buffer against a burst of %d samples, not the fusion's compute.\n",
-            static_cast<unsigned long long>(*failed->fusion_udp_drops), failed->fusion_cpu_pct, failed->n);
+            "\n== Phase 2: capacity, N segments at %.0f Hz, %.0f s per step, fresh fusion process per step ==\n",
+            opt.rate_hz, opt.step_seconds);
+        std::vector<int> ns;
+        for (int n : {7, 16}) ns.push_back(n);
+        for (int n = 32; n < opt.max_segments; n *= 2) ns.push_back(n);
+        std::erase_if(ns, [&](int n) { return n > opt.max_segments; });
+        if (ns.empty() || ns.back() != opt.max_segments) ns.push_back(opt.max_segments);
+        for (int n : ns) {
+          if (bsn::dds::shutdown_requested()) break;
+          const RunResult& r = step(n);
+          if (r.bench_limited()) {
+            limited = &r;
+            break;
+          }
+          if (!r.pass) {
+            failed = &r;
+            break;
+          }
+          largest = n;
+        }
+        // Bisect between the last pass and the first failure.
+        for (int i = 0; i < opt.refine && failed && largest > 0 && !bsn::dds::shutdown_requested(); ++i) {
+          const int mid = (largest + failed->n) / 2;
+          if (mid <= largest || mid >= failed->n) break;
+          std::printf("  refining between %d and %d:\n", largest, failed->n);
+          const RunResult& r = step(mid);
+          if (r.bench_limited()) {
+            limited = &r;
+            break;
+          }
+          if (r.pass) {
+            largest = mid;
+          } else {
+            failed = &r;
+          }
+        }
+      }
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "bsn_bench_e2e: error: %s\n", e.what());
+      exit_code = 1;
+    }
+
+    // Summary.
+    std::printf("\n---- summary%s ----\n", label);
+    std::printf("bsn_bench_e2e, %s, %s\n", utc_now().c_str(), host.c_str());
+    std::printf("command: %s\n", command.c_str());
+    std::printf(
+        "setup: Fast DDS 2.9.1 over UDPv4 on one host; one `bsn fusion` process; the bench publishes all N nodes (%s "
+        "pacing, %s body) and subscribes to bsn/orientation. %s.\n",
+        opt.pacing.c_str(), opt.topology.c_str(), buffers.c_str());
+    if (latency) {
+      const auto& r = *latency;
+      std::printf(
+          "latency, raw sample written -> orientation received, %d segments x %.0f Hz, %.0f s: median %s us, p90 %s "
+          "us, p99 %s us, max %s us (%llu sent, %llu received)%s\n",
+          r.n, opt.rate_hz, opt.latency_seconds, fmt("%.0f", r.latency.p50_us).c_str(),
+          fmt("%.0f", r.latency.p90_us).c_str(), fmt("%.0f", r.latency.p99_us).c_str(),
+          fmt("%.0f", r.latency.max_us).c_str(), static_cast<unsigned long long>(r.sent),
+          static_cast<unsigned long long>(r.received), r.pass ? "" : ("  FAILED: " + r.error).c_str());
+    }
+    if (!steps.empty()) {
+      std::printf("capacity at %.0f Hz per segment, %.0f s per step, no loss allowed:\n", opt.rate_hz,
+                  opt.step_seconds);
+      std::printf("  %6s %9s %9s %7s %8s %8s %9s %9s %9s %8s  %s\n", "N", "sent", "received", "lost", "p50 us",
+                  "p99 us", "fusion %", "us/sample", "bench %", "pub Hz", "result");
+      std::vector<const RunResult*> sorted;
+      for (const auto& r : steps) sorted.push_back(&r);
+      std::stable_sort(sorted.begin(), sorted.end(), [](auto* a, auto* b) { return a->n < b->n; });
+      for (const RunResult* r : sorted) {
+        std::printf("  %6d %9llu %9llu %7lld %8s %8s %9s %9s %9s %8.1f  %s\n", r->n,
+                    static_cast<unsigned long long>(r->sent), static_cast<unsigned long long>(r->received),
+                    static_cast<long long>(r->sent) - static_cast<long long>(r->received),
+                    fmt("%.0f", r->latency.p50_us).c_str(), fmt("%.0f", r->latency.p99_us).c_str(),
+                    fmt("%.1f", r->fusion_cpu_pct).c_str(),
+                    fmt("%.1f", r->sent > 0 ? 1e6 * r->fusion_cpu_s / static_cast<double>(r->sent) : NAN).c_str(),
+                    fmt("%.1f", r->bench_cpu_pct).c_str(), r->achieved_rate_hz, verdict(*r));
+      }
+      std::printf("largest N with no loss at %.0f Hz: %d\n", opt.rate_hz, largest);
+      if (failed) {
+        std::printf("  first failing N = %d: %s\n", failed->n, failed->error.c_str());
+        if (failed->fusion_udp_drops.value_or(0) > 0) {
+          std::printf(
+              "  the fusion's UDP receive socket overflowed (%llu datagrams dropped by the kernel) at %.0f %% CPU: the "
+              "limit is the socket buffer against a burst of %d samples, not the fusion's compute.\n",
+              static_cast<unsigned long long>(*failed->fusion_udp_drops), failed->fusion_cpu_pct, failed->n);
+        }
+      }
+      if (limited) {
+        std::printf(
+            "  stopped at N = %d because the bench itself was the bottleneck (%s); the fusion limit is at least %d and "
+            "was not reached.\n",
+            limited->n,
+            limited->publisher_limited
+                ? ("its publisher achieved " + fmt("%.1f", limited->achieved_rate_hz) + " Hz per node").c_str()
+                : "its own orientation reader dropped datagrams while the fusion fused every sample",
+            largest);
+      }
+      if (!failed && !limited && !steps.empty() && largest == opt.max_segments) {
+        std::printf("  every step passed up to --max-segments %d; the limit is higher.\n", opt.max_segments);
       }
     }
-    if (limited) {
-      std::printf(
-          "  stopped at N = %d because the bench itself was the bottleneck (%s); the fusion limit is at least %d and "
-          "was not reached.\n",
-          limited->n,
-          limited->publisher_limited
-              ? ("its publisher achieved " + fmt("%.1f", limited->achieved_rate_hz) + " Hz per node").c_str()
-              : "its own orientation reader dropped datagrams while the fusion fused every sample",
-          largest);
+    return Outcome{latency, largest};
+  };
+  const Outcome open = measure(opt.security.empty() ? "" : " (DDS-Security off)");
+  if (!opt.security.empty() && !bsn::dds::shutdown_requested()) {
+    bench.set_security(opt.security);
+    const Outcome secured = measure(" (DDS-Security on: authenticated, encrypted payloads and discovery)");
+    std::printf("\n---- DDS-Security on against off, this run ----\n");
+    if (open.latency && secured.latency) {
+      std::printf("median latency: %s us on, %s us off: overhead %s us\n",
+                  fmt("%.0f", secured.latency->latency.p50_us).c_str(),
+                  fmt("%.0f", open.latency->latency.p50_us).c_str(),
+                  fmt("%.0f", secured.latency->latency.p50_us - open.latency->latency.p50_us).c_str());
     }
-    if (!failed && !limited && !steps.empty() && largest == opt.max_segments) {
-      std::printf("  every step passed up to --max-segments %d; the limit is higher.\n", opt.max_segments);
+    if (open.largest > 0) {
+      std::printf("capacity: %d segments on, %d off: %.0f %%\n", secured.largest, open.largest,
+                  100.0 * secured.largest / open.largest);
     }
   }
+  const double total_s = std::chrono::duration<double>(Clock::now() - started).count();
   std::printf("run time: %.0f s\n", total_s);
 
   // Cleanup checks.
