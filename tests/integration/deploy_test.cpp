@@ -29,9 +29,9 @@ class DeployProfiles : public ProcessTest {
   }
 };
 
-TEST_F(DeployProfiles, LanMulticast) { expect_samples_flow(kProfiles + "lan-multicast.xml", test_domain(16)); }
-TEST_F(DeployProfiles, OneHostSharedMemory) { expect_samples_flow(kProfiles + "one-host-shm.xml", test_domain(17)); }
-TEST_F(DeployProfiles, LargeBody) { expect_samples_flow(kProfiles + "large-body.xml", test_domain(18)); }
+TEST_F(DeployProfiles, LanMulticast) { expect_samples_flow(kProfiles + "lan-multicast.xml", test_domain(34)); }
+TEST_F(DeployProfiles, OneHostSharedMemory) { expect_samples_flow(kProfiles + "one-host-shm.xml", test_domain(35)); }
+TEST_F(DeployProfiles, LargeBody) { expect_samples_flow(kProfiles + "large-body.xml", test_domain(36)); }
 
 TEST_F(DeployProfiles, DiscoveryServer) {
   // The shipped client profile names the server at 127.0.0.1:11811; a server on another port keeps this test
@@ -51,14 +51,14 @@ TEST_F(DeployProfiles, DiscoveryServer) {
   const std::string server_path = (dir() / "server.xml").string();
   write_file(server_path, server_profile);
   dds::ChildProcess server({"/usr/bin/fast-discovery-server", "-x", server_path}, log_path("server").string());
-  expect_samples_flow(client_path, test_domain(19));
+  expect_samples_flow(client_path, test_domain(37));
   server.stop(std::chrono::milliseconds(3000));
 }
 
 TEST_F(DeployProfiles, BrokenProfileIsAClearError) {
   const std::string broken = (dir() / "broken.xml").string();
   write_file(broken, "<dds><profiles><participant profile_name=\"x\" is_default_profile=\"true\">");
-  spawn("sim", {"sim", "--node", "pelvis", "--profile", broken, "--domain", std::to_string(test_domain(16))});
+  spawn("sim", {"sim", "--node", "pelvis", "--profile", broken, "--domain", std::to_string(test_domain(34))});
   const auto status = child("sim").wait_for(15s);
   ASSERT_TRUE(status.has_value()) << "bsn sim kept running with a broken profile";
   EXPECT_FALSE(exited_cleanly(status));

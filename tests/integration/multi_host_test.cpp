@@ -208,14 +208,14 @@ class MultiHost : public ProcessTest {
 };
 
 TEST_F(MultiHost, MulticastDiscovery) {
-  const int domain = test_domain(20);
+  const int domain = test_domain(38);
   start_viewer(domain);
   start_body(domain);
   expect_full_rate(5s);
 }
 
 TEST_F(MultiHost, DiscoveryServerWithMulticastBlocked) {
-  const int domain = test_domain(21);
+  const int domain = test_domain(39);
   ASSERT_TRUE(hosts_->block_multicast());
   // The shipped profiles, pointed at a server on the fusion host.
   const std::string server = hosts_->address("fusion");

@@ -143,7 +143,7 @@ class Security : public ProcessTest {
 };
 
 TEST_F(Security, AuthorisedRolesFlowAndOutsidersGetNothing) {
-  const int domain = test_domain(12);
+  const int domain = test_domain(30);
   // Another authority's identity with the same name and role as the real viewer.
   const std::filesystem::path other_pki = dir() / "other-pki";
   ASSERT_EQ(make_pki(other_pki, "viewer:viewer"), 0) << read_file(other_pki.string() + ".log");
@@ -192,7 +192,7 @@ TEST_F(Security, AuthorisedRolesFlowAndOutsidersGetNothing) {
 }
 
 TEST_F(Security, PermissionsLimitEachRoleToItsTopics) {
-  const int domain = test_domain(13);
+  const int domain = test_domain(31);
   // A viewer identity cannot publish raw samples: `bsn sim` refuses to start, naming the topic.
   spawn("sim-as-viewer",
         {"sim", "--node", "pelvis", "--domain", std::to_string(domain), "--security", (pki_ / "viewer").string()});
@@ -214,7 +214,7 @@ TEST_F(Security, PermissionsLimitEachRoleToItsTopics) {
 
 // The capture sees the joint's name and the topic's name in the open (so it would catch a leak) ...
 TEST_F(Security, CaptureSeesJointAnglesOnAnOpenNetwork) {
-  const int domain = test_domain(14);
+  const int domain = test_domain(32);
   LoopbackCapture capture(domain);
   if (!capture.available()) GTEST_SKIP() << "a packet socket needs CAP_NET_RAW (run as root): " << strerror(errno);
   auto viewer = participant_as(domain, "");
@@ -228,7 +228,7 @@ TEST_F(Security, CaptureSeesJointAnglesOnAnOpenNetwork) {
 
 // ... and neither once the body is secured.
 TEST_F(Security, NoPlaintextJointAnglesOnASecuredNetwork) {
-  const int domain = test_domain(15);
+  const int domain = test_domain(33);
   LoopbackCapture capture(domain);
   if (!capture.available()) GTEST_SKIP() << "a packet socket needs CAP_NET_RAW (run as root): " << strerror(errno);
   auto viewer = participant_as(domain, pki_ / "viewer");
