@@ -26,7 +26,6 @@
 
 namespace {
 
-using namespace bsn;
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
 
@@ -38,7 +37,7 @@ double rss_mb(int pid) {
   return -1.0;
 }
 
-std::uint64_t rows_of(const io::SessionReader& r, const std::string& topic) {
+std::uint64_t rows_of(const bsn::io::SessionReader& r, const std::string& topic) {
   std::uint64_t n = 0;
   for (const auto& s : r.streams_of(topic)) n += r.rows(s, "arrival_ns");
   return n;
@@ -46,14 +45,15 @@ std::uint64_t rows_of(const io::SessionReader& r, const std::string& topic) {
 
 void recorder_phase(int domain, int segments, double seconds, const std::filesystem::path& dir) {
   const std::string out = (dir / "record_bench.h5").string();
-  dds::ChildProcess rec({BSN_EXECUTABLE, "record", "--out", out, "--overwrite", "--domain", std::to_string(domain)},
-                        (dir / "record.log").string());
-  dds::Participant p({domain, "bench sessions"});
-  auto raw_w = p.make_writer(dds::kRawTopic);
-  auto ori_w = p.make_writer(dds::kOrientationTopic);
-  auto truth_w = p.make_writer(dds::kTruthOrientationTopic);
-  auto joint_w = p.make_writer(dds::kJointAnglesTopic);
-  auto status_w = p.make_writer(dds::kStatusTopic);
+  bsn::dds::ChildProcess rec(
+      {BSN_EXECUTABLE, "record", "--out", out, "--overwrite", "--domain", std::to_string(domain)},
+      (dir / "record.log").string());
+  bsn::dds::Participant p({domain, "bench sessions"});
+  auto raw_w = p.make_writer(bsn::dds::kRawTopic);
+  auto ori_w = p.make_writer(bsn::dds::kOrientationTopic);
+  auto truth_w = p.make_writer(bsn::dds::kTruthOrientationTopic);
+  auto joint_w = p.make_writer(bsn::dds::kJointAnglesTopic);
+  auto status_w = p.make_writer(bsn::dds::kStatusTopic);
   const auto deadline = Clock::now() + 10s;
   while ((raw_w->matched() < 1 || ori_w->matched() < 1 || truth_w->matched() < 1 || joint_w->matched() < 1 ||
           status_w->matched() < 1) &&
@@ -77,7 +77,7 @@ void recorder_phase(int domain, int segments, double seconds, const std::filesys
   auto next = start;
   auto next_second = start + 1s;
   for (std::uint64_t k = 0; Clock::now() - start < std::chrono::duration<double>(seconds); ++k) {
-    const std::uint64_t ts = dds::monotonic_ns();
+    const std::uint64_t ts = bsn::dds::monotonic_ns();
     for (int i = 0; i < segments; ++i) {
       auto& r = raw[static_cast<std::size_t>(i)];
       r.seq(k);
@@ -109,7 +109,7 @@ void recorder_phase(int domain, int segments, double seconds, const std::filesys
   const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
   std::this_thread::sleep_for(1500ms);
   rec.stop(10000ms);
-  const io::SessionReader r(out);
+  const bsn::io::SessionReader r(out);
   const std::uint64_t got_raw = rows_of(r, "bsn/raw"), got_ori = rows_of(r, "bsn/orientation"),
                       got_truth = rows_of(r, "bsn/truth/orientation"), got_joint = rows_of(r, "bsn/joint_angles"),
                       got_status = rows_of(r, "bsn/status");
@@ -139,16 +139,16 @@ void replay_phase(int domain, double seconds, const std::vector<double>& speeds,
   const int nodes = 7;
   const auto n = static_cast<std::uint64_t>(seconds * 100.0);
   {
-    io::SessionWriter w(input, true, {});
+    bsn::io::SessionWriter w(input, true, {});
     for (int k = 0; k < nodes; ++k) {
       const std::size_t s = w.add_stream("bsn/raw", "n" + std::to_string(k), "bsn::RawSample",
-                                         {{"arrival_ns", io::ColumnType::kU64, 1, ""},
-                                          {"timestamp_ns", io::ColumnType::kU64, 1, ""},
-                                          {"seq", io::ColumnType::kU64, 1, ""},
-                                          {"acc", io::ColumnType::kF64, 3, ""},
-                                          {"gyr", io::ColumnType::kF64, 3, ""},
-                                          {"mag", io::ColumnType::kF64, 3, ""},
-                                          {"channels", io::ColumnType::kU32, 1, ""}});
+                                         {{"arrival_ns", bsn::io::ColumnType::kU64, 1, ""},
+                                          {"timestamp_ns", bsn::io::ColumnType::kU64, 1, ""},
+                                          {"seq", bsn::io::ColumnType::kU64, 1, ""},
+                                          {"acc", bsn::io::ColumnType::kF64, 3, ""},
+                                          {"gyr", bsn::io::ColumnType::kF64, 3, ""},
+                                          {"mag", bsn::io::ColumnType::kF64, 3, ""},
+                                          {"channels", bsn::io::ColumnType::kU32, 1, ""}});
       for (std::uint64_t i = 0; i < n; ++i) {
         const std::uint64_t ts = 1000000000ull + i * 10000000ull + static_cast<std::uint64_t>(k) * 1000ull;
         const double v[3] = {0.0, 0.0, 9.81};
@@ -168,18 +168,18 @@ void replay_phase(int domain, double seconds, const std::vector<double>& speeds,
               static_cast<unsigned long long>(n * nodes));
   for (const double speed : speeds) {
     const std::string out = (dir / "replayed.h5").string();
-    dds::ChildProcess rec({BSN_EXECUTABLE, "record", "--out", out, "--overwrite", "--topic", "bsn/raw", "--domain",
-                           std::to_string(domain)},
-                          (dir / "record2.log").string());
+    bsn::dds::ChildProcess rec({BSN_EXECUTABLE, "record", "--out", out, "--overwrite", "--topic", "bsn/raw", "--domain",
+                                std::to_string(domain)},
+                               (dir / "record2.log").string());
     const auto start = Clock::now();
-    dds::ChildProcess rep(
+    bsn::dds::ChildProcess rep(
         {BSN_EXECUTABLE, "replay", input, "--speed", std::to_string(speed), "--domain", std::to_string(domain)},
         (dir / "replay.log").string());
     rep.wait_for(std::chrono::seconds(static_cast<long>(seconds * 2 + 60)));
     const double wall = std::chrono::duration<double>(Clock::now() - start).count();
     std::this_thread::sleep_for(1000ms);
     rec.stop(10000ms);
-    const io::SessionReader r(out);
+    const bsn::io::SessionReader r(out);
     const std::uint64_t got = rows_of(r, "bsn/raw");
     std::printf("  --speed %-5g recorded %llu of %llu (%s), %.1f s wall incl. discovery\n", speed,
                 static_cast<unsigned long long>(got), static_cast<unsigned long long>(n * nodes),
