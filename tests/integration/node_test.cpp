@@ -32,7 +32,8 @@ int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXI
 struct Seen {
   std::mutex m;
   std::vector<bsn::RawSample> raw;
-  std::map<std::string, std::uint64_t> rejected;
+  std::map<std::string, std::uint64_t> rejected;  // of the node's latest status (one node per test, or:)
+  std::map<std::string, std::map<std::string, std::uint64_t>> rejected_by_node;
   std::uint64_t accepted = 0;
 };
 
@@ -48,7 +49,10 @@ class NodeSource : public ProcessTest {
       std::lock_guard lock(seen_.m);
       for (const auto& n : s.nodes()) {
         seen_.accepted = n.accepted();
-        for (const auto& r : n.rejected()) seen_.rejected[r.reason()] = r.count();
+        for (const auto& r : n.rejected()) {
+          seen_.rejected[r.reason()] = r.count();
+          seen_.rejected_by_node[n.node_id()][r.reason()] = r.count();
+        }
       }
     });
   }
@@ -218,9 +222,10 @@ TEST_F(NodeSource, UdpLinesAndNgimuOscWithBadDatagramsCounted) {
   std::this_thread::sleep_for(500ms);
   std::lock_guard lock(seen_.m);
   EXPECT_EQ(seen_.raw.size(), 100u);
-  EXPECT_EQ(seen_.rejected["wrong_type_tags"], 1u);
-  EXPECT_EQ(seen_.rejected["truncated"], 1u);
-  EXPECT_EQ(seen_.rejected["oversized"], 1u);
+  EXPECT_EQ(seen_.rejected_by_node["ngimu"]["wrong_type_tags"], 1u);
+  EXPECT_EQ(seen_.rejected_by_node["ngimu"]["truncated"], 1u);
+  EXPECT_EQ(seen_.rejected_by_node["ngimu"]["oversized"], 1u);
+  EXPECT_EQ(seen_.rejected_by_node["phone"]["not_a_number"], 1u);
   for (const auto& s : seen_.raw) {
     if (s.node_id() == "ngimu") {
       EXPECT_DOUBLE_EQ(s.gyr()[0], std::numbers::pi / 2);  // 90 deg/s

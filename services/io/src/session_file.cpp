@@ -225,8 +225,12 @@ void SessionWriter::create_stream(Stream& s) {
     Handle space(H5Screate_simple(rank, dims, maxdims), H5Sclose);
     Handle dcpl(hdf5::untimed_dataset_properties(), H5Pclose);
     H5Pset_chunk(dcpl.get(), rank, chunk);
+    // A chunk cache for the chunk being filled and no more: the default (1 MiB per dataset) keeps every chunk
+    // written, and a 64-segment body's thousands of datasets then grow the recorder by megabytes a second.
+    Handle dapl(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
+    H5Pset_chunk_cache(dapl.get(), 11, 2 * chunk[0] * chunk[1] * column_type_size(c.spec.type), 1.0);
     c.dataset = Handle(H5Dcreate2(s.group.get(), c.spec.name.c_str(), file_type(c.spec.type), space.get(), H5P_DEFAULT,
-                                  dcpl.get(), H5P_DEFAULT),
+                                  dcpl.get(), dapl.get()),
                        H5Dclose);
     if (!c.dataset.ok()) throw IoError(path_ + ": cannot create dataset '" + group_path + "/" + c.spec.name + "'");
     if (!c.spec.unit.empty() && !write_string_attribute(c.dataset.get(), "unit", c.spec.unit)) {
