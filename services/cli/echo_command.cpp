@@ -7,6 +7,7 @@
 
 #include "bsn/dds/shutdown.hpp"
 #include "format.hpp"
+#include "sample_fields.hpp"
 #include "tools.hpp"
 
 namespace bsn::services {
@@ -18,6 +19,7 @@ struct EchoOptions {
   double rate_hz = 0.0;    ///< print at most this many samples per second (0 = all)
   double timeout_s = 0.0;  ///< exit 1 if not `count` samples within this time (0 = wait forever)
   int domain = 0;
+  std::string format = "text";  ///< text (human units), csv (header line, then SI values) or json (one per line)
 };
 
 using Clock = std::chrono::steady_clock;
@@ -29,7 +31,8 @@ struct Printer {
   std::atomic<long> printed{0};
   Clock::time_point last_print{};
 
-  void print(const std::string& line) {
+  /// Prints `line`; `header` (if any) goes before the first line printed.
+  void print(const std::string& line, const std::string& header = "") {
     std::lock_guard lock(mutex);
     if (opt.count > 0 && printed.load() >= opt.count) return;
     const auto now = Clock::now();
@@ -38,6 +41,10 @@ struct Printer {
       return;
     }
     last_print = now;
+    if (printed.load() == 0 && !header.empty()) {
+      std::fputs(header.c_str(), stdout);
+      std::fputc('\n', stdout);
+    }
     std::fputs(line.c_str(), stdout);
     std::fputc('\n', stdout);
     std::fflush(stdout);
@@ -52,6 +59,24 @@ std::string format_line(const bsn::Orientation& s, std::string_view topic) {
 template <class T>
 std::string format_line(const T& s, std::string_view) {
   return format_sample(s);
+}
+
+// --format csv|json: SI values at full precision, for scripts. The CSV header comes with the first sample.
+template <class T>
+std::string machine_line(const T& s, const char* topic, const std::string& format) {
+  if constexpr (HasFields<T>) {
+    return format == "json" ? json_object(s, topic) : csv_row(s);
+  } else {
+    return format_line(s, topic);
+  }
+}
+template <class T>
+std::string csv_header_of(const T& s, const std::string& format) {
+  if constexpr (HasFields<T>) {
+    return format == "csv" ? csv_header(s) : "";
+  } else {
+    return "";
+  }
 }
 
 std::vector<std::string> topic_names() {
@@ -73,13 +98,28 @@ int run_echo(const EchoOptions& opt) {
                  near.empty() ? "" : ("; did you mean '" + near + "'?").c_str(), topic_list().c_str());
     return 2;
   }
+  bool machine_format_known = true;
+  dds::for_each_topic([&](const auto& topic) {
+    using T = typename std::remove_cvref_t<decltype(topic)>::Type;
+    if (opt.topic == topic.name && !HasFields<T>) machine_format_known = opt.format == "text";
+  });
+  if (!machine_format_known) {
+    std::fprintf(stderr, "bsn echo: error: no %s format for %s yet (use --format text)\n", opt.format.c_str(),
+                 opt.topic.c_str());
+    return 2;
+  }
   Printer printer(opt);
   DdsCommandFrame frame(opt.domain, "bsn echo");
   std::shared_ptr<void> reader;  // of the one topic named, whatever its type
   dds::for_each_topic([&](const auto& topic) {
     if (opt.topic != topic.name) return;
-    reader = frame.participant().make_reader(
-        topic, [&printer, name = topic.name](const auto& s, const auto&) { printer.print(format_line(s, name)); });
+    reader = frame.participant().make_reader(topic, [&printer, &opt, name = topic.name](const auto& s, const auto&) {
+      if (opt.format == "text") {
+        printer.print(format_line(s, name));
+      } else {
+        printer.print(machine_line(s, name, opt.format), csv_header_of(s, opt.format));
+      }
+    });
   });
   const auto start = Clock::now();
   return frame.run_ticks(std::chrono::milliseconds(20), [&]() -> std::optional<int> {
@@ -103,6 +143,9 @@ Command echo_command() {
         cmd->add_option("--rate", opt->rate_hz, "print at most HZ samples per second")->check(CLI::NonNegativeNumber);
         cmd->add_option("--timeout", opt->timeout_s, "exit 1 if --count samples have not arrived within S seconds")
             ->check(CLI::NonNegativeNumber);
+        cmd->add_option("--format", opt->format, "text (human units), csv (SI, header first) or json (one per line)")
+            ->check(CLI::IsMember({"text", "csv", "json"}))
+            ->capture_default_str();
         add_domain_option(cmd, opt->domain);
         return [opt] { return run_echo(*opt); };
       }};

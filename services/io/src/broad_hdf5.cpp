@@ -1,34 +1,13 @@
-#include <hdf5.h>
-
 #include <cmath>
 #include <vector>
 
 #include "bsn/io/recording.hpp"
+#include "hdf5_handle.hpp"
 
 namespace bsn::io {
 namespace {
 
-// Owns one HDF5 identifier and closes it with the matching function.
-class Handle {
- public:
-  Handle(hid_t id, herr_t (*close)(hid_t)) : id_(id), close_(close) {}
-  ~Handle() {
-    if (id_ >= 0) close_(id_);
-  }
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  hid_t get() const { return id_; }
-  bool ok() const { return id_ >= 0; }
-
- private:
-  hid_t id_;
-  herr_t (*close_)(hid_t);
-};
-
-// HDF5 prints its own error stack to stderr by default; we report errors ourselves.
-struct QuietErrors {
-  QuietErrors() { H5Eset_auto2(H5E_DEFAULT, nullptr, nullptr); }
-};
+using hdf5::Handle;
 
 bool has_dataset(hid_t file, const char* name) { return H5Lexists(file, name, H5P_DEFAULT) > 0; }
 
@@ -66,13 +45,7 @@ std::vector<std::uint8_t> read_flags(hid_t file, const std::string& path, const 
   return {raw.begin(), raw.end()};
 }
 
-// Datasets without modification times: the same recording always gives the same bytes, so outputs can be
-// compared with cmp and reruns are reproducible.
-hid_t untimed_dataset_properties() {
-  const hid_t dcpl = H5Pcreate(H5P_DATASET_CREATE);
-  if (dcpl >= 0) H5Pset_obj_track_times(dcpl, false);
-  return dcpl;
-}
+using hdf5::untimed_dataset_properties;
 
 template <class Matrix>
 void write_matrix(hid_t file, const std::string& path, const char* name, const Matrix& m) {
@@ -88,7 +61,7 @@ void write_matrix(hid_t file, const std::string& path, const char* name, const M
 }  // namespace
 
 Recording read_broad_hdf5(const std::string& path) {
-  static const QuietErrors quiet;
+  hdf5::quiet_errors();
   Handle file(H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT), H5Fclose);
   if (!file.ok()) throw IoError(path + ": cannot open as HDF5");
   Recording rec;
@@ -111,7 +84,7 @@ Recording read_broad_hdf5(const std::string& path) {
 }
 
 void write_broad_hdf5(const std::string& path, const Recording& rec) {
-  static const QuietErrors quiet;
+  hdf5::quiet_errors();
   rec.validate(path);
   Handle file(H5Fcreate(path.c_str(), H5F_ACC_TRUNC, H5P_DEFAULT, H5P_DEFAULT), H5Fclose);
   if (!file.ok()) throw IoError(path + ": cannot create HDF5 file");
