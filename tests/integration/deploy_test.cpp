@@ -58,7 +58,7 @@ TEST_F(DeployProfiles, DiscoveryServer) {
 TEST_F(DeployProfiles, BrokenProfileIsAClearError) {
   const std::string broken = (dir() / "broken.xml").string();
   write_file(broken, "<dds><profiles><participant profile_name=\"x\" is_default_profile=\"true\">");
-  spawn("sim", {"sim", "--node", "pelvis", "--profile", broken, "--domain", std::to_string(test_domain(34))});
+  spawn("sim", {"sim", "--node", "pelvis", "--profile", broken, "--domain", std::to_string(test_domain(40))});
   const auto status = child("sim").wait_for(15s);
   ASSERT_TRUE(status.has_value()) << "bsn sim kept running with a broken profile";
   EXPECT_FALSE(exited_cleanly(status));
