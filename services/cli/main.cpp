@@ -1,5 +1,6 @@
 // `bsn`: one program, one subcommand per process role (like git). Each command registers its options next to
 // its run function; this list is the only place that names them all.
+#include "calibration_service.hpp"
 #include "command.hpp"
 #include "fusion_service.hpp"
 #include "sim_node.hpp"
@@ -7,7 +8,7 @@
 
 int main(int argc, char** argv) {
   using namespace bsn::services;
-  const Command commands[] = {bsn::sim::sim_command(), fusion_command(), echo_command(),
-                              demo_command(),          eval_command(),   calibrate_command()};
+  const Command commands[] = {bsn::sim::sim_command(), fusion_command(),    echo_command(),       demo_command(),
+                              eval_command(),          calibrate_command(), calibration_command()};
   return run_cli(argc, argv, commands);
 }

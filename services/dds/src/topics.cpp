@@ -40,6 +40,8 @@ Delivery delivery(TopicQos kind) {
       return {RELIABLE_RELIABILITY_QOS, TRANSIENT_LOCAL_DURABILITY_QOS, 1, 8};
     case TopicQos::kCommand:
       return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 16, 16};
+    case TopicQos::kProgress:
+      return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 4, 16};
   }
   return {BEST_EFFORT_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 1, 1};
 }
@@ -55,14 +57,21 @@ DataWriterQos writer_qos(TopicQos kind, DataWriterQos q) {
   set_limits(q.resource_limits(), d.writer_depth);
   // Data is written from the caller's thread: lowest latency, and no extra thread per writer.
   q.publish_mode().kind = SYNCHRONOUS_PUBLISH_MODE;
+  if (kind == TopicQos::kProgress) {
+    // Readers keep the default (infinite) requested lease, so every reader matches; they still see the writer
+    // turn not-alive when its own 1 s lease runs out (a killed process), which a client reports.
+    q.liveliness().kind = AUTOMATIC_LIVELINESS_QOS;
+    q.liveliness().lease_duration = eprosima::fastrtps::Duration_t(kProgressLivelinessLease_s);
+    q.liveliness().announcement_period = eprosima::fastrtps::Duration_t(kProgressLivelinessLease_s / 4.0);
+  }
   return q;
 }
 
 DataReaderQos reader_qos(TopicQos kind, DataReaderQos q) {
   const Delivery d = delivery(kind);
   // A best-effort reader matches writers of either kind; only latched and command topics need reliability.
-  q.reliability().kind = (kind == TopicQos::kLatched || kind == TopicQos::kCommand) ? RELIABLE_RELIABILITY_QOS
-                                                                                    : BEST_EFFORT_RELIABILITY_QOS;
+  const bool reliable = kind == TopicQos::kLatched || kind == TopicQos::kCommand || kind == TopicQos::kProgress;
+  q.reliability().kind = reliable ? RELIABLE_RELIABILITY_QOS : BEST_EFFORT_RELIABILITY_QOS;
   q.durability().kind = d.durability;
   q.history().kind = KEEP_LAST_HISTORY_QOS;
   q.history().depth = d.reader_depth;
