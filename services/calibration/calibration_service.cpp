@@ -345,7 +345,7 @@ void CalibrationService::finish(const std::string& request_id, std::uint64_t now
   if (it == runs_.end()) return;
   Run run = std::move(it->second);
   runs_.erase(it);
-  std::size_t succeeded = 0;
+  std::vector<std::pair<const NodeRun*, calib::SessionResult>> to_store;
   for (const NodeRun& n : run.nodes) {
     busy_.erase(n.node);
     calib::SessionResult r;
@@ -356,17 +356,7 @@ void CalibrationService::finish(const std::string& request_id, std::uint64_t now
       r.samples = n.session.samples();
       r.message = abort_reason;
     }
-    if (r.success) {
-      try {
-        const std::string path = store_.save(n.node, r, run.id);
-        logging::log_info("request '", run.id, "': node '", n.node, "' calibrated (", r.samples, " samples, ",
-                          r.field.quality.pose_count, " poses); stored in ", path);
-      } catch (const std::exception& e) {
-        // The fit is good; only its persistence failed: publish it and say so.
-        logging::log_error("request '", run.id, "': node '", n.node, "': ", e.what());
-        r.message = std::string("not stored: ") + e.what();
-      }
-    } else {
+    if (!r.success) {
       const double waited = seconds_between(run.start_ns, now);
       if (r.message == "no sample arrived")
         r.message = "no sample arrived within " + std::to_string(waited).substr(0, 4) + " s";
@@ -378,14 +368,28 @@ void CalibrationService::finish(const std::string& request_id, std::uint64_t now
     result_writer_->write(m);
     const std::pair<std::string, int> key{n.node, static_cast<int>(run.kind)};
     if (r.success) {
-      ++succeeded;
       last_success_[key] = m;
+      to_store.emplace_back(&n, std::move(r));
     } else if (const auto good = last_success_.find(key); good != last_success_.end()) {
       // The latched sample of (node, kind) is the calibration in effect for late joiners, not the failure.
       result_writer_->write(good->second);
     }
   }
-  publish_done(run, succeeded);
+  publish_done(run, to_store.size());
+  // Stored after every node's result is out: the store's fsync would delay each result by milliseconds.
+  for (auto& [n, r] : to_store) {
+    try {
+      const std::string path = store_.save(n->node, r, run.id);
+      logging::log_info("request '", run.id, "': node '", n->node, "' calibrated (", r.samples, " samples, ",
+                        r.field.quality.pose_count, " poses); stored in ", path);
+    } catch (const std::exception& e) {
+      // The fit is good and in effect; only its persistence failed: say so on the result too.
+      logging::log_error("request '", run.id, "': node '", n->node, "': ", e.what());
+      bsn::CalibrationResult& m = last_success_[{n->node, static_cast<int>(run.kind)}];
+      m.message(std::string("not stored: ") + e.what());
+      result_writer_->write(m);
+    }
+  }
 }
 
 namespace {

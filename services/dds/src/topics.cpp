@@ -58,8 +58,7 @@ DataWriterQos writer_qos(TopicQos kind, DataWriterQos q) {
   // Data is written from the caller's thread: lowest latency, and no extra thread per writer.
   q.publish_mode().kind = SYNCHRONOUS_PUBLISH_MODE;
   if (kind == TopicQos::kProgress) {
-    // Readers keep the default (infinite) requested lease, so every reader matches; they still see the writer
-    // turn not-alive when its own 1 s lease runs out (a killed process), which a client reports.
+    // Asserted by the participant (AUTOMATIC) every quarter lease: a killed process stops asserting it.
     q.liveliness().kind = AUTOMATIC_LIVELINESS_QOS;
     q.liveliness().lease_duration = eprosima::fastrtps::Duration_t(kProgressLivelinessLease_s);
     q.liveliness().announcement_period = eprosima::fastrtps::Duration_t(kProgressLivelinessLease_s / 4.0);
@@ -76,6 +75,12 @@ DataReaderQos reader_qos(TopicQos kind, DataReaderQos q) {
   q.history().kind = KEEP_LAST_HISTORY_QOS;
   q.history().depth = d.reader_depth;
   set_limits(q.resource_limits(), d.reader_depth);
+  if (kind == TopicQos::kProgress) {
+    // Fast DDS tracks a writer's liveliness with the reader's requested lease (infinite by default: never lost),
+    // so the reader asks for one: 1.5 x the writer's (it must be >= the offered 1 s to match).
+    q.liveliness().kind = AUTOMATIC_LIVELINESS_QOS;
+    q.liveliness().lease_duration = eprosima::fastrtps::Duration_t(1.5 * kProgressLivelinessLease_s);
+  }
   return q;
 }
 
