@@ -19,8 +19,8 @@ enum class TopicQos {
   kEstimateBestEffort,  ///< BEST_EFFORT variant of kEstimate (lower overhead, lossy)
   kLatched,             ///< RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1: late joiners get the latest (status, results)
   kCommand,             ///< RELIABLE, VOLATILE, KEEP_LAST 16 (calibration requests)
-  kProgress,  ///< RELIABLE, VOLATILE, KEEP_LAST 4; AUTOMATIC liveliness, writer lease 1 s, reader 1.5 s, so a
-              ///< reader learns within 1.5 s that the writing process died (calibration progress)
+  kProgress,            ///< RELIABLE, VOLATILE, KEEP_LAST 4, liveliness leases 1 s (writer) and 1.5 s (reader):
+                        ///< a reader learns within 1.5 s that the writer's process died (calibration progress)
 };
 
 /// A topic whose samples are `PubSub::type` (e.g. bsn::RawSample for bsn::RawSamplePubSubType).
