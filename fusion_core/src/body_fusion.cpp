@@ -78,6 +78,23 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
   return r;
 }
 
+std::optional<std::size_t> BodyFusion::update_calibration(std::string_view node,
+                                                          const calib::SensorCalibration& update) {
+  const auto index = segment_of_node_.find(node);
+  if (index == segment_of_node_.end()) return std::nullopt;
+  Segment& seg = segments_[index->second];
+  if (update.accelerometer) seg.calibration.accelerometer = update.accelerometer;
+  if (update.gyroscope) seg.calibration.gyroscope = update.gyroscope;
+  if (update.magnetometer) seg.calibration.magnetometer = update.magnetometer;
+  seg.filter->reset();
+  return index->second;
+}
+
+std::optional<std::size_t> BodyFusion::segment_of(std::string_view node) const {
+  const auto index = segment_of_node_.find(node);
+  return index == segment_of_node_.end() ? std::nullopt : std::optional<std::size_t>(index->second);
+}
+
 std::span<const std::size_t> BodyFusion::check_stale(std::uint64_t now_ns) {
   turned_stale_.clear();
   for (std::size_t i = 0; i < segments_.size(); ++i) {

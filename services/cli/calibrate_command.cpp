@@ -12,6 +12,7 @@
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/io/json.hpp"
 #include "bsn/io/recording.hpp"
+#include "calibration_client.hpp"
 #include "tools.hpp"
 
 namespace bsn::services {
@@ -29,6 +30,9 @@ struct CalibrateOptions {
   double rest_rate_rad_s = 0.05;  ///< rest threshold on |gyro - bias|, rad/s
   double min_pose_s = 1.0;        ///< shortest rest that counts as a pose, s
   std::string plot;               ///< with --allan: write the curves as an SVG here
+  bool live = false;              ///< calibrate through the calibration service instead
+  bool field_magnitude_given = false;
+  LiveCalibrationOptions live_options;
 };
 
 using calib::FieldCalibration;
@@ -276,6 +280,16 @@ int run_allan(const CalibrateOptions& opt) {
 
 /// Runs the command; returns the process exit code (0 ok, 1 the data do not calibrate, 2 unreadable input).
 int run_calibrate(const CalibrateOptions& options) {
+  if (options.live) {
+    if (!options.input.empty() || !options.allan.empty()) {
+      std::fprintf(stderr, "bsn calibrate: --live takes no --input or --allan\n");
+      return 2;
+    }
+    LiveCalibrationOptions live = options.live_options;
+    live.node = options.node;
+    if (options.field_magnitude_given) live.field_magnitude = options.field_magnitude;
+    return run_live_calibration(live);
+  }
   if (options.input.empty() == options.allan.empty()) {
     std::fprintf(stderr, "bsn calibrate: give exactly one of --input FILE or --allan FILE\n");
     return 2;
@@ -291,18 +305,39 @@ Command calibrate_command() {
             auto opt = std::make_shared<CalibrateOptions>();
             cmd->add_option("--input", opt->input, "recording (CSV, BROAD HDF5) of still poses turned by hand");
             cmd->add_option("--allan", opt->allan, "static recording: print Allan noise figures instead");
-            cmd->add_option("--field-magnitude", opt->field_magnitude, "|calibrated magnetometer|, M")
-                ->capture_default_str();
+            auto* field = cmd->add_option("--field-magnitude", opt->field_magnitude,
+                                          "|calibrated magnetometer|, M (with --live: uT, default 50)")
+                              ->capture_default_str();
             cmd->add_flag("--json", opt->json, "print the magnetometer calibration as one JSON object");
             cmd->add_option("--output", opt->output, "calibration file to write (default: INPUT.calib.yaml)");
-            cmd->add_option("--node", opt->node, "node id to record in the calibration file");
+            cmd->add_option("--node", opt->node,
+                            "node id to record in the calibration file; with --live: the node (or ID,ID,...) to "
+                            "calibrate");
             cmd->add_flag("--accelerometer", opt->accelerometer, "also calibrate the accelerometer (|g|)");
             cmd->add_flag("--gyro-bias", opt->gyro_bias, "also write the gyro bias measured at rest");
             cmd->add_option("--rest-threshold", opt->rest_rate_rad_s, "rest when |gyro - bias| < this, rad/s")
                 ->capture_default_str();
             cmd->add_option("--min-pose", opt->min_pose_s, "shortest rest counted as a pose, s")->capture_default_str();
             cmd->add_option("--plot", opt->plot, "with --allan: write the Allan curves as SVG");
-            return [opt] { return run_calibrate(*opt); };
+            LiveCalibrationOptions& live = opt->live_options;
+            cmd->add_flag("--live", opt->live, "calibrate live through `bsn calibration` (see --node, --kind)");
+            cmd->add_option("--kind", live.kind, "with --live: magnetometer, gyro-bias or accelerometer")
+                ->capture_default_str();
+            cmd->add_flag("--all-nodes", live.all_nodes, "with --live: every node publishing on bsn/raw");
+            cmd->add_option("--duration", live.duration_s, "with --live: collect for S seconds (0: --samples only)")
+                ->capture_default_str();
+            cmd->add_option("--samples", live.sample_count, "with --live: or until N samples per node");
+            cmd->add_flag("--until-good", live.until_good,
+                          "with --live: stop as soon as the quality report is good enough");
+            cmd->add_option("--request-id", live.request_id, "with --live: the request id (default: host-pid-time)");
+            cmd->add_option("--service-timeout", live.service_timeout_s,
+                            "with --live: seconds to wait for a calibration service")
+                ->capture_default_str();
+            add_domain_option(cmd, live.domain);
+            return [opt, field] {
+              opt->field_magnitude_given = field->count() > 0;
+              return run_calibrate(*opt);
+            };
           }};
 }
 

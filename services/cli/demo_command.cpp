@@ -14,6 +14,7 @@
 #include "bsn/dds/participant.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/logging/log.hpp"
+#include "calibration_client.hpp"
 #include "format.hpp"
 #include "tools.hpp"
 
@@ -25,6 +26,7 @@ struct DemoOptions {
   std::string body_path;    ///< "" = default 7-segment lower body
   double rate_hz = 100.0;   ///< sample rate of the simulated nodes
   int domain = 0;
+  bool calibrate = false;  ///< the live-calibration demo instead
 };
 
 using Clock = std::chrono::steady_clock;
@@ -199,8 +201,13 @@ Command demo_command() {
                 ->check(CLI::NonNegativeNumber);
             cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
             cmd->add_option("--rate", opt->rate_hz, "sample rate of the simulated nodes, Hz")->capture_default_str();
+            cmd->add_flag("--calibrate", opt->calibrate,
+                          "instead: live calibration of a simulated node with a hard-iron offset, heading error "
+                          "before and after");
             add_domain_option(cmd, opt->domain);
-            return [opt] { return run_demo(*opt); };
+            return [opt] {
+              return opt->calibrate ? run_calibration_demo(5.0, opt->duration_s, opt->domain) : run_demo(*opt);
+            };
           }};
 }
 

@@ -107,4 +107,33 @@ std::string format_sample(const bsn::CalibrationResult& s) {
          (s.message().empty() ? "" : " message=\"" + s.message() + "\"");
 }
 
+const char* phase_name(bsn::CalibrationPhase phase) {
+  switch (phase) {
+    case bsn::CALIBRATION_PHASE_WAITING:
+      return "waiting";
+    case bsn::CALIBRATION_PHASE_COLLECTING:
+      return "collecting";
+    case bsn::CALIBRATION_PHASE_FITTING:
+      return "fitting";
+    case bsn::CALIBRATION_PHASE_DONE:
+      return "done";
+    case bsn::CALIBRATION_PHASE_REFUSED:
+      return "refused";
+  }
+  return "unknown";
+}
+
+std::string format_sample(const bsn::CalibrationProgress& s) {
+  std::string out =
+      "calibration_progress " + s.request_id() + " " + phase_name(s.phase()) +
+      printf_string(" elapsed=%.1fs left=%.1fs done=%.0f%%", s.elapsed_s(), s.seconds_left(), 100.0 * s.fraction()) +
+      " \"" + (s.phase() == bsn::CALIBRATION_PHASE_REFUSED ? s.message() : s.instruction()) + "\"";
+  for (const auto& n : s.nodes())
+    out += "\n  " + n.node_id() +
+           printf_string(" samples=%u poses=%u octants=%u coverage=%.2f", n.samples(), n.poses(), n.octants(),
+                         n.sphere_coverage()) +
+           " \"" + n.instruction() + "\"";
+  return out;
+}
+
 }  // namespace bsn::services

@@ -14,5 +14,8 @@ std::string format_sample(const bsn::JointAngles& s);
 std::string format_sample(const bsn::Status& s);
 std::string format_sample(const bsn::CalibrationRequest& s);
 std::string format_sample(const bsn::CalibrationResult& s);
+std::string format_sample(const bsn::CalibrationProgress& s);
+/// "waiting", "collecting", "fitting", "done", "refused".
+const char* phase_name(bsn::CalibrationPhase phase);
 
 }  // namespace bsn::services

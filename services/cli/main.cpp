@@ -1,5 +1,6 @@
 // `bsn`: one program, one subcommand per process role (like git). Each command registers its options next to
 // its run function; this list is the only place that names them all.
+#include "calibration_service.hpp"
 #include "command.hpp"
 #include "export_service.hpp"
 #include "fusion_service.hpp"
@@ -11,8 +12,8 @@
 
 int main(int argc, char** argv) {
   using namespace bsn::services;
-  const Command commands[] = {bsn::sim::sim_command(), fusion_command(),    echo_command(),   demo_command(),
-                              eval_command(),          calibrate_command(), record_command(), replay_command(),
-                              export_command(),        node_command()};
+  const Command commands[] = {bsn::sim::sim_command(), fusion_command(),    echo_command(),        demo_command(),
+                              eval_command(),          calibrate_command(), calibration_command(), record_command(),
+                              replay_command(),        export_command(),    node_command()};
   return run_cli(argc, argv, commands);
 }

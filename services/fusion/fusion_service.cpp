@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -34,7 +35,8 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
     : participant_(participant),
       options_(std::move(options)),
       fusion_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
-      accepted_at_last_status_(fusion_.body().segments.size(), 0) {
+      accepted_at_last_status_(fusion_.body().segments.size(), 0),
+      calibration_id_(fusion_.body().segments.size()) {
   if (options_.process_id.empty()) options_.process_id = default_process_id();
   // --best-effort switches both estimate topics from their own delivery to BEST_EFFORT.
   const auto estimate = [this](const auto& topic) {
@@ -47,6 +49,47 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
   // The reader goes last: its callback may fire as soon as it exists.
   raw_reader_ = participant_.make_reader(
       dds::kRawTopic, [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
+  // Live calibrations (TRANSIENT_LOCAL: the ones published before this start arrive too and override the body
+  // file's).
+  calibration_reader_ = participant_.make_reader(
+      dds::kCalibrationResultTopic,
+      [this](const bsn::CalibrationResult& r, const eprosima::fastdds::dds::SampleInfo&) { on_calibration(r); });
+}
+
+void FusionService::on_calibration(const bsn::CalibrationResult& r) {
+  if (!r.success()) return;  // a failed calibration changes nothing; the service republishes the one in effect
+  const char* channel = r.kind() == bsn::CALIBRATION_MAGNETOMETER    ? "magnetometer"
+                        : r.kind() == bsn::CALIBRATION_GYRO_BIAS     ? "gyroscope"
+                        : r.kind() == bsn::CALIBRATION_ACCELEROMETER ? "accelerometer"
+                                                                     : nullptr;
+  calib::ChannelCalibration c;
+  const auto& b = r.bias();
+  const auto& h = r.transform();
+  c.bias = calib::Vec3(b[0], b[1], b[2]);
+  c.transform << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
+  if (r.kind() == bsn::CALIBRATION_GYRO_BIAS) c.transform.setIdentity();
+  std::lock_guard lock(mutex_);
+  const auto segment = fusion_.segment_of(r.node_id());
+  if (!segment) return;  // a node of another body
+  if (channel == nullptr || !c.bias.allFinite() || !c.transform.allFinite() ||
+      !(std::abs(c.transform.determinant()) > 1e-12 * std::pow(c.transform.norm(), 3))) {
+    logging::log_warn("calibration '", r.request_id(), "' for node '", r.node_id(),
+                      "' refused: unknown kind, non-finite numbers or a singular transform");
+    return;
+  }
+  std::string& applied = applied_calibration_[{*segment, static_cast<int>(r.kind())}];
+  if (applied == r.request_id()) return;  // the same calibration again (republished after a failure)
+  calib::SensorCalibration update;
+  if (r.kind() == bsn::CALIBRATION_MAGNETOMETER) update.magnetometer = c;
+  if (r.kind() == bsn::CALIBRATION_GYRO_BIAS) update.gyroscope = c;
+  if (r.kind() == bsn::CALIBRATION_ACCELEROMETER) update.accelerometer = c;
+  fusion_.update_calibration(r.node_id(), update);
+  applied = r.request_id();
+  calibration_id_[*segment] = last_calibration_id_ = r.request_id();
+  const fusion::SegmentSpec& spec = fusion_.body().segments[*segment];
+  logging::log_info("node '", spec.node, "' (", spec.name, "): ", channel, " calibration '", r.request_id(),
+                    "' applied from its next sample on; its filter restarts");
+  publish_status(dds::monotonic_ns());
 }
 
 void FusionService::on_raw(const bsn::RawSample& raw) {
@@ -136,6 +179,7 @@ void FusionService::publish_status(std::uint64_t now) {
     n.clock_resets(c.clock_resets);
     n.stale(state.stale);
     n.last_sample_age_s(state.last_arrival_ns ? seconds(now - *state.last_arrival_ns) : -1.0);
+    n.last_calibration_id(calibration_id_[i]);
     nodes.push_back(std::move(n));
   }
   st.nodes(std::move(nodes));
@@ -143,6 +187,7 @@ void FusionService::publish_status(std::uint64_t now) {
   st.unknown_nodes(fusion_.unknown_nodes());
   st.qos_mismatches(participant_.qos_mismatches());
   st.write_failures(write_failures_);
+  st.last_calibration_id(last_calibration_id_);
   status_writer_->write(st);
   last_status_ns_ = now;
 }

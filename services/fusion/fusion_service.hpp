@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -31,7 +32,8 @@ class FusionService {
   void tick();
 
  private:
-  void on_raw(const bsn::RawSample& raw);  ///< called from the DDS thread
+  void on_raw(const bsn::RawSample& raw);                     ///< called from the DDS thread
+  void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
   void publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);
   void publish_joint(const fusion::JointEstimate& j, std::uint64_t timestamp_ns);
   void publish_status(std::uint64_t now_ns);
@@ -47,6 +49,12 @@ class FusionService {
   std::unique_ptr<dds::Writer<bsn::JointAngles>> joint_writer_;
   std::unique_ptr<dds::Writer<bsn::Status>> status_writer_;
   std::unique_ptr<dds::Reader<bsn::RawSample>> raw_reader_;
+  std::unique_ptr<dds::Reader<bsn::CalibrationResult>> calibration_reader_;
+  /// Live calibrations: per segment the request id last applied (bsn/status), per (segment, kind) to apply each
+  /// result once; the last one applied to any node.
+  std::vector<std::string> calibration_id_;
+  std::map<std::pair<std::size_t, int>, std::string> applied_calibration_;
+  std::string last_calibration_id_;
   bsn::Orientation orientation_msg_;
   bsn::JointAngles joint_msg_;
 };

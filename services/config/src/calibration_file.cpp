@@ -38,7 +38,7 @@ calib::ChannelCalibration channel(const Reader& r, const YAML::Node& n, const st
 
 }  // namespace
 
-calib::SensorCalibration parse_calibration(const std::string& yaml_text, const std::string& source) {
+CalibrationDocument parse_calibration_document(const std::string& yaml_text, const std::string& source) {
   YAML::Node root;
   try {
     root = YAML::Load(yaml_text);
@@ -47,25 +47,53 @@ calib::SensorCalibration parse_calibration(const std::string& yaml_text, const s
   }
   const Reader reader(source);
   if (!root || root.IsNull()) reader.fail_at(1, "the calibration file is empty");
-  calib::SensorCalibration out;
+  CalibrationDocument doc;
+  calib::SensorCalibration& out = doc.calibration;
   try {
-    reader.check_keys(root, {"node", "magnetometer", "accelerometer", "gyroscope", "quality"}, "the calibration file");
-    if (root["magnetometer"]) out.magnetometer = channel(reader, root["magnetometer"], "magnetometer");
-    if (root["accelerometer"]) out.accelerometer = channel(reader, root["accelerometer"], "accelerometer");
+    reader.check_keys(root, {"node", "request_id", "magnetometer", "accelerometer", "gyroscope", "quality"},
+                      "the calibration file");
+    if (const YAML::Node n = root["node"]) {
+      if (!n.IsScalar()) reader.fail(n, "node must be a node id");
+      doc.node = n.as<std::string>();
+      doc.node_line = n.Mark().line + 1;
+    }
+    if (const YAML::Node n = root["request_id"]) {
+      if (!n.IsScalar()) reader.fail(n, "request_id must be a string");
+      doc.request_id = n.as<std::string>();
+    }
+    if (const YAML::Node m = root["magnetometer"]) {
+      out.magnetometer = channel(reader, m, "magnetometer");
+      if (m["field_magnitude"])
+        doc.magnetometer_field_magnitude = reader.number(m["field_magnitude"], "field_magnitude");
+      if (m["field_vector"]) doc.magnetometer_field_vector = vector3(reader, m["field_vector"], "field_vector");
+    }
+    if (const YAML::Node a = root["accelerometer"]) {
+      out.accelerometer = channel(reader, a, "accelerometer");
+      if (a["field_magnitude"])
+        doc.accelerometer_field_magnitude = reader.number(a["field_magnitude"], "field_magnitude");
+    }
     if (root["gyroscope"]) out.gyroscope = channel(reader, root["gyroscope"], "gyroscope");
   } catch (const YAML::Exception& e) {
     reader.fail_at(e.mark.line + 1, e.msg);
   }
   if (out.empty()) reader.fail(root, "the calibration file holds no magnetometer, accelerometer or gyroscope");
-  return out;
+  return doc;
 }
 
-calib::SensorCalibration load_calibration_file(const std::string& path) {
+calib::SensorCalibration parse_calibration(const std::string& yaml_text, const std::string& source) {
+  return parse_calibration_document(yaml_text, source).calibration;
+}
+
+CalibrationDocument load_calibration_document(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw ConfigError(path + ": cannot open the calibration file");
   std::stringstream text;
   text << in.rdbuf();
-  return parse_calibration(text.str(), path);
+  return parse_calibration_document(text.str(), path);
+}
+
+calib::SensorCalibration load_calibration_file(const std::string& path) {
+  return load_calibration_document(path).calibration;
 }
 
 namespace {
@@ -95,11 +123,12 @@ void emit_field(YAML::Emitter& out, const std::string& name, const calib::FieldC
 
 std::string calibration_to_yaml(const std::string& node, const calib::FieldCalibration* magnetometer,
                                 const calib::FieldCalibration* accelerometer,
-                                const calib::ChannelCalibration* gyroscope) {
+                                const calib::ChannelCalibration* gyroscope, const std::string& request_id) {
   YAML::Emitter out;
   out.SetDoublePrecision(10);
   out << YAML::BeginMap;
   if (!node.empty()) out << YAML::Key << "node" << YAML::Value << node;
+  if (!request_id.empty()) out << YAML::Key << "request_id" << YAML::Value << request_id;
   if (magnetometer != nullptr && magnetometer->ok()) emit_field(out, "magnetometer", *magnetometer);
   if (accelerometer != nullptr && accelerometer->ok()) emit_field(out, "accelerometer", *accelerometer);
   if (gyroscope != nullptr) {
@@ -136,7 +165,15 @@ std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations
   for (const YAML::Node& s : root["segments"]) {
     if (!s.IsMap() || !s["calibration"] || !s["name"]) continue;
     const std::string node = s["node"] ? s["node"].as<std::string>() : s["name"].as<std::string>();
-    out[node] = load_calibration_file(resolve_relative(s["calibration"].as<std::string>(), body_path));
+    const std::string file = resolve_relative(s["calibration"].as<std::string>(), body_path);
+    CalibrationDocument doc = load_calibration_document(file);
+    // A file made for another sensor would silently spoil this one's estimates.
+    if (!doc.node.empty() && doc.node != node) {
+      throw ConfigError(file + ":" + std::to_string(doc.node_line) + ": this calibration is for node '" + doc.node +
+                        "', but segment '" + s["name"].as<std::string>() + "' (" + body_path + ":" +
+                        std::to_string(s["calibration"].Mark().line + 1) + ") is on node '" + node + "'");
+    }
+    out[node] = std::move(doc.calibration);
   }
   return out;
 }

@@ -45,6 +45,10 @@ class ReaderEvents final : public DataReaderListener {
   void on_subscription_matched(DataReader*, const SubscriptionMatchedStatus& s) override {
     events_->matched.store(s.current_count);
   }
+  void on_liveliness_changed(DataReader*, const LivelinessChangedStatus& s) override {
+    events_->alive_writers.store(s.alive_count);
+    if (s.not_alive_count_change > 0) events_->writers_lost += static_cast<std::uint64_t>(s.not_alive_count_change);
+  }
   void on_requested_incompatible_qos(DataReader*, const RequestedIncompatibleQosStatus& s) override {
     if (events_->mismatch_counter) ++*events_->mismatch_counter;
     logging::log_warn("topic ", events_->topic, ": a writer offers QoS incompatible with this reader (",

@@ -40,6 +40,8 @@ Delivery delivery(TopicQos kind) {
       return {RELIABLE_RELIABILITY_QOS, TRANSIENT_LOCAL_DURABILITY_QOS, 1, 8};
     case TopicQos::kCommand:
       return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 16, 16};
+    case TopicQos::kProgress:
+      return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 4, 16};
   }
   return {BEST_EFFORT_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 1, 1};
 }
@@ -55,18 +57,30 @@ DataWriterQos writer_qos(TopicQos kind, DataWriterQos q) {
   set_limits(q.resource_limits(), d.writer_depth);
   // Data is written from the caller's thread: lowest latency, and no extra thread per writer.
   q.publish_mode().kind = SYNCHRONOUS_PUBLISH_MODE;
+  if (kind == TopicQos::kProgress) {
+    // Asserted by the participant (AUTOMATIC) every quarter lease: a killed process stops asserting it.
+    q.liveliness().kind = AUTOMATIC_LIVELINESS_QOS;
+    q.liveliness().lease_duration = eprosima::fastrtps::Duration_t(kProgressLivelinessLease_s);
+    q.liveliness().announcement_period = eprosima::fastrtps::Duration_t(kProgressLivelinessLease_s / 4.0);
+  }
   return q;
 }
 
 DataReaderQos reader_qos(TopicQos kind, DataReaderQos q) {
   const Delivery d = delivery(kind);
   // A best-effort reader matches writers of either kind; only latched and command topics need reliability.
-  q.reliability().kind = (kind == TopicQos::kLatched || kind == TopicQos::kCommand) ? RELIABLE_RELIABILITY_QOS
-                                                                                    : BEST_EFFORT_RELIABILITY_QOS;
+  const bool reliable = kind == TopicQos::kLatched || kind == TopicQos::kCommand || kind == TopicQos::kProgress;
+  q.reliability().kind = reliable ? RELIABLE_RELIABILITY_QOS : BEST_EFFORT_RELIABILITY_QOS;
   q.durability().kind = d.durability;
   q.history().kind = KEEP_LAST_HISTORY_QOS;
   q.history().depth = d.reader_depth;
   set_limits(q.resource_limits(), d.reader_depth);
+  if (kind == TopicQos::kProgress) {
+    // Fast DDS tracks a writer's liveliness with the reader's requested lease (infinite by default: never lost),
+    // so the reader asks for one: 1.5 x the writer's (it must be >= the offered 1 s to match).
+    q.liveliness().kind = AUTOMATIC_LIVELINESS_QOS;
+    q.liveliness().lease_duration = eprosima::fastrtps::Duration_t(1.5 * kProgressLivelinessLease_s);
+  }
   return q;
 }
 

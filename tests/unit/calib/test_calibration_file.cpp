@@ -83,7 +83,9 @@ TEST_F(TempDir, BadFilesNameTheLineAndTheProblem) {
 
 TEST_F(TempDir, BodyKeyLoadsTheFileRelativeToTheBodyFileForItsNode) {
   fs::create_directories(dir_ / "cal");
-  write("cal/thigh.yaml", kCalibration);
+  std::string text = kCalibration;
+  text.replace(text.find("node: thigh_l"), 13, "node: sensor7");
+  write("cal/thigh.yaml", text);
   const std::string body = write("body.yaml", R"(segments:
   - name: pelvis
   - name: thigh_l
@@ -98,6 +100,27 @@ TEST_F(TempDir, BodyKeyLoadsTheFileRelativeToTheBodyFileForItsNode) {
   ASSERT_EQ(calibrations.count("sensor7"), 1u);
   EXPECT_TRUE(calibrations.at("sensor7").magnetometer->bias.isApprox(calib::Vec3(1, -2, 3)));
   EXPECT_TRUE(load_body_calibrations("").empty());
+}
+
+TEST_F(TempDir, BodyKeyRefusesAFileMadeForAnotherNode) {
+  write("imu.yaml", "node: imu\nrequest_id: r1\nmagnetometer:\n  bias: [1, 2, 3]\n");
+  const std::string body = write("body.yaml", R"(segments:
+  - name: pelvis
+  - name: thigh_l
+    calibration: imu.yaml
+)");
+  try {
+    (void)load_body_calibrations(body);
+    FAIL() << "a calibration for node imu was accepted on node thigh_l";
+  } catch (const ConfigError& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("imu.yaml:1: this calibration is for node 'imu'"), std::string::npos) << m;
+    EXPECT_NE(m.find("body.yaml:4"), std::string::npos) << m;
+    EXPECT_NE(m.find("on node 'thigh_l'"), std::string::npos) << m;
+  }
+  const CalibrationDocument doc = load_calibration_document((dir_ / "imu.yaml").string());
+  EXPECT_EQ(doc.node, "imu");
+  EXPECT_EQ(doc.request_id, "r1");
 }
 
 TEST_F(TempDir, BodyKeyWithABadFileStopsAtTheSegmentsLine) {

@@ -261,5 +261,40 @@ TEST(BodyFusion, ClockResetRestartsTheFilter) {
   EXPECT_EQ(rejected(f, 0, SampleVerdict::kTimeBackward), std::uint64_t(rebase_after - 1));
 }
 
+TEST(BodyFusion, ALiveCalibrationAppliesFromTheNextSampleAndRestartsTheFilter) {
+  // A magnetometer with a hard-iron offset as large as the field: the heading is far off. A live calibration
+  // removes the offset from the next sample on and restarts the filter, which starts at the true heading at once
+  // instead of turning slowly (tau_mag 4 s) from the wrong one.
+  BodyFusion f(one_segment_body(), {}, {}, 0);
+  const Quat q = from_yaw_pitch_roll({1.2, 0.1, -0.2});
+  const Vec3 offset(30.0, -25.0, 10.0);
+  std::uint64_t t = kSecondNs;
+  auto heading_error = [&](const Quat& estimate) {
+    return std::abs(to_yaw_pitch_roll(relative_orientation(q, estimate)).yaw);
+  };
+  double before = 0.0;
+  for (int k = 0; k < 200; ++k, t += kStepNs) {
+    ImuSample s = exact_sample_at_ns(q, t);
+    s.mag += offset;
+    const SampleResult& r = f.process({"n", static_cast<std::uint64_t>(k), s}, t);
+    ASSERT_EQ(r.outcome, SampleOutcome::kEstimated);
+    before = heading_error(r.orientation);
+  }
+  EXPECT_GT(before, 10.0 * kDegToRad);
+  calib::SensorCalibration live;
+  live.magnetometer = calib::ChannelCalibration{offset, calib::Mat3::Identity()};
+  ASSERT_EQ(f.update_calibration("n", live), std::optional<std::size_t>(0));
+  EXPECT_EQ(f.update_calibration("nobody", live), std::nullopt);
+  EXPECT_TRUE(f.segment(0).calibration.magnetometer->bias.isApprox(offset));
+  ImuSample s = exact_sample_at_ns(q, t);
+  s.mag += offset;
+  const SampleResult& r = f.process({"n", 200, s}, t);
+  ASSERT_EQ(r.outcome, SampleOutcome::kEstimated);
+  EXPECT_TRUE(r.flags.reinitialised);
+  EXPECT_LT(heading_error(r.orientation), kExactRad * 1e3);
+  // The gate's counters belong to the node, not to its calibration: they go on.
+  EXPECT_EQ(f.segment(0).gate.counters().accepted, 201u);
+}
+
 }  // namespace
 }  // namespace bsn::fusion

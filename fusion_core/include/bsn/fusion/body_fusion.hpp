@@ -78,6 +78,13 @@ class BodyFusion {
 
   /// Runs one sample through its segment's pipeline; the result is valid until the next call.
   const SampleResult& process(const NodeSample& sample, std::uint64_t arrival_ns);
+  /// A live calibration: replaces the channels that `update` holds in the calibration of `node`'s segment (the
+  /// others stay), from its next sample on, and restarts its filter, whose state (orientation, the disturbance
+  /// detector's magnetic reference, the gyro bias estimate) was built on the old calibration. Returns the
+  /// segment, nullopt for a node on no segment.
+  std::optional<std::size_t> update_calibration(std::string_view node, const calib::SensorCalibration& update);
+  /// The segment of a node, nullopt for a node on no segment.
+  std::optional<std::size_t> segment_of(std::string_view node) const;
   /// Marks the nodes silent at now_ns stale; returns the segments that turned stale with this call.
   std::span<const std::size_t> check_stale(std::uint64_t now_ns);
 

@@ -1,7 +1,8 @@
 // Calibration files: the YAML that `bsn calibrate` writes and `bsn fusion` loads per node (body-model key
 // `calibration: FILE`). Format (every channel optional; u = transform * (raw - bias)):
 //
-//   node: thigh_l                    # optional, informational
+//   node: thigh_l                    # optional: the node it belongs to; a body segment on another node refuses it
+//   request_id: lab-2026-12-01-1     # optional, informational: the live request that produced it
 //   magnetometer:
 //     bias: [bx, by, bz]             # raw unit
 //     transform: [[h11, h12, h13], [h21, h22, h23], [h31, h32, h33]]
@@ -28,14 +29,30 @@ calib::SensorCalibration parse_calibration(const std::string& yaml_text, const s
 /// Reads a calibration file. Throws ConfigError.
 calib::SensorCalibration load_calibration_file(const std::string& path);
 
+/// A calibration file with what it says about itself.
+struct CalibrationDocument {
+  calib::SensorCalibration calibration;
+  std::string node;                           ///< its `node:`, "" if it names none
+  int node_line = 0;                          ///< line of `node:` (1-based), 0 without
+  std::string request_id;                     ///< its `request_id:`, "" if none
+  double magnetometer_field_magnitude = 0.0;  ///< its magnetometer's field_magnitude, 0 if none
+  calib::Vec3 magnetometer_field_vector = calib::Vec3::Zero();
+  double accelerometer_field_magnitude = 0.0;
+};
+
+/// parse_calibration and load_calibration_file, with the file's own node, request id and field figures.
+CalibrationDocument parse_calibration_document(const std::string& yaml_text, const std::string& source);
+CalibrationDocument load_calibration_document(const std::string& path);
+
 /// A calibration file's text. `magnetometer` (with its quality report) and `accelerometer` are written when
 /// ok(); `gyroscope` when given.
 std::string calibration_to_yaml(const std::string& node, const calib::FieldCalibration* magnetometer,
                                 const calib::FieldCalibration* accelerometer,
-                                const calib::ChannelCalibration* gyroscope);
+                                const calib::ChannelCalibration* gyroscope, const std::string& request_id = "");
 
 /// The calibrations named by the segments of a body model file (`calibration: FILE`, relative to the body
-/// file), by node id. Empty for "" (the default body). Throws ConfigError.
+/// file), by node id. Empty for "" (the default body). Throws ConfigError, also for a file whose `node:` is not
+/// the segment's node ("FILE:LINE: ...").
 std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations(const std::string& body_path);
 
 /// `path` relative to the directory of `relative_to` (a file), unless it is absolute.

@@ -32,6 +32,8 @@ struct EndpointEvents {
   std::string topic;
   std::atomic<int> matched{0};
   std::atomic<std::uint64_t>* mismatch_counter = nullptr;
+  std::atomic<int> alive_writers{0};           ///< reader: matched writers whose liveliness holds
+  std::atomic<std::uint64_t> writers_lost{0};  ///< reader: times a matched writer lost its liveliness
   std::mutex callback_mutex;
   std::function<void(eprosima::fastdds::dds::DataReader*)> on_data;
 };
@@ -65,6 +67,9 @@ class Reader {
   Reader(const Reader&) = delete;
   Reader& operator=(const Reader&) = delete;
   int matched() const { return events_->matched.load(); }
+  /// Matched writers whose liveliness holds, and how often one lost it (its process died or hangs).
+  int alive_writers() const { return events_->alive_writers.load(); }
+  std::uint64_t writers_lost() const { return events_->writers_lost.load(); }
 
  private:
   std::shared_ptr<EndpointEvents> events_;

@@ -1,7 +1,7 @@
 // Every bsn topic, declared once (design.md section 3): its name, its IDL type (through the type support that
 // fastddsgen generates for it) and how it is delivered. Writers and readers take all three from here, so they
 // always match; `bsn echo` (and recorders and bridges) iterate kAllTopics. Adding a topic is one constant and its
-// entry in kAllTopics. bsn/calibration/progress gets its entry together with its IDL type.
+// entry in kAllTopics.
 #pragma once
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
@@ -19,6 +19,8 @@ enum class TopicQos {
   kEstimateBestEffort,  ///< BEST_EFFORT variant of kEstimate (lower overhead, lossy)
   kLatched,             ///< RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1: late joiners get the latest (status, results)
   kCommand,             ///< RELIABLE, VOLATILE, KEEP_LAST 16 (calibration requests)
+  kProgress,            ///< RELIABLE, VOLATILE, KEEP_LAST 4, liveliness leases 1 s (writer) and 1.5 s (reader):
+                        ///< a reader learns within 1.5 s that the writer's process died (calibration progress)
 };
 
 /// A topic whose samples are `PubSub::type` (e.g. bsn::RawSample for bsn::RawSamplePubSubType).
@@ -38,6 +40,8 @@ inline constexpr Topic<bsn::CalibrationRequestPubSubType> kCalibrationRequestTop
                                                                                    TopicQos::kCommand};
 inline constexpr Topic<bsn::CalibrationResultPubSubType> kCalibrationResultTopic{"bsn/calibration/result",
                                                                                  TopicQos::kLatched};
+inline constexpr Topic<bsn::CalibrationProgressPubSubType> kCalibrationProgressTopic{"bsn/calibration/progress",
+                                                                                     TopicQos::kProgress};
 
 inline constexpr std::tuple kAllTopics{kRawTopic,
                                        kOrientationTopic,
@@ -45,7 +49,8 @@ inline constexpr std::tuple kAllTopics{kRawTopic,
                                        kStatusTopic,
                                        kTruthOrientationTopic,
                                        kCalibrationRequestTopic,
-                                       kCalibrationResultTopic};
+                                       kCalibrationResultTopic,
+                                       kCalibrationProgressTopic};
 
 /// Calls `f(topic)` for every topic of kAllTopics, in order.
 template <class F>
@@ -60,6 +65,9 @@ eprosima::fastdds::dds::DataWriterQos writer_qos(TopicQos kind, eprosima::fastdd
 /// Reader QoS that matches the writer of `kind`, on top of `base`. Readers keep a deeper history than writers so
 /// that a burst of samples of one instance between two takes is not overwritten.
 eprosima::fastdds::dds::DataReaderQos reader_qos(TopicQos kind, eprosima::fastdds::dds::DataReaderQos base);
+
+/// The liveliness lease a kProgress writer offers, s.
+inline constexpr double kProgressLivelinessLease_s = 1.0;
 
 /// Human-readable name of a QoS policy id, for incompatible-QoS reports.
 const char* qos_policy_name(unsigned policy_id);

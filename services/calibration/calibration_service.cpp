@@ -1,0 +1,437 @@
+#include "calibration_service.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <sstream>
+
+#include "bsn/dds/conversions.hpp"
+#include "bsn/logging/log.hpp"
+
+namespace bsn::services {
+namespace {
+
+constexpr std::size_t kMaxNodeIdLength = 63;  // as bsn::RawSample.node_id
+
+double seconds_between(std::uint64_t from, std::uint64_t to) {
+  return to > from ? static_cast<double>(to - from) * 1e-9 : 0.0;
+}
+
+std::vector<std::string> split_nodes(const std::string& list) {
+  std::vector<std::string> out;
+  std::stringstream in(list);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    const auto b = item.find_first_not_of(" \t");
+    const auto e = item.find_last_not_of(" \t");
+    if (b == std::string::npos) continue;
+    item = item.substr(b, e - b + 1);
+    if (std::find(out.begin(), out.end(), item) == out.end()) out.push_back(item);
+  }
+  return out;
+}
+
+calib::SessionSample to_session_sample(const bsn::RawSample& raw) {
+  const fusion::ImuSample imu = dds::to_imu_sample(raw);
+  calib::SessionSample s;
+  s.seq = raw.seq();
+  s.timestamp_ns = imu.timestamp_ns;
+  s.acc = imu.acc;
+  s.gyr = imu.gyr;
+  s.mag = imu.mag;
+  s.has_acc = imu.has_acc;
+  s.has_gyr = imu.has_gyr;
+  s.has_mag = imu.has_mag;
+  return s;
+}
+
+std::array<double, 3> arr(const calib::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+std::array<double, 9> arr(const calib::Mat3& m) {
+  return {m(0, 0), m(0, 1), m(0, 2), m(1, 0), m(1, 1), m(1, 2), m(2, 0), m(2, 1), m(2, 2)};
+}
+
+bsn::CalibrationResult result_message(const std::string& node, const std::string& request_id,
+                                      const calib::SessionResult& r) {
+  bsn::CalibrationResult m;
+  m.node_id(node);
+  m.request_id(request_id);
+  m.kind(to_wire(r.kind));
+  m.success(r.success);
+  m.sample_count(static_cast<std::uint32_t>(r.samples));
+  m.transform(arr(calib::Mat3::Identity().eval()));
+  if (r.kind == calib::CalibrationKind::gyro_bias) {
+    m.bias(arr(r.gyro.bias));
+    m.pose_count(0);
+  } else {
+    const calib::FitQuality& q = r.field.quality;
+    m.bias(arr(r.field.calibration.bias));
+    m.transform(arr(r.field.calibration.transform));
+    m.field_magnitude(r.field.field_magnitude);
+    m.field_vector(arr(r.field.field_vector));
+    m.residual_rms(q.residual_rms);
+    m.condition_number(q.transform_condition);
+    m.pose_count(static_cast<std::uint32_t>(q.pose_count));
+    m.sphere_coverage(q.sphere_coverage);
+    m.octants_covered(static_cast<std::uint32_t>(q.octants_covered));
+    m.pose_residual_rms(q.pose_residual_rms);
+    m.warnings(q.warnings);
+  }
+  return m;
+}
+
+}  // namespace
+
+bsn::CalibrationKind to_wire(calib::CalibrationKind kind) {
+  switch (kind) {
+    case calib::CalibrationKind::magnetometer:
+      return bsn::CALIBRATION_MAGNETOMETER;
+    case calib::CalibrationKind::gyro_bias:
+      return bsn::CALIBRATION_GYRO_BIAS;
+    case calib::CalibrationKind::accelerometer:
+      return bsn::CALIBRATION_ACCELEROMETER;
+  }
+  return bsn::CALIBRATION_MAGNETOMETER;
+}
+
+std::optional<calib::CalibrationKind> from_wire(bsn::CalibrationKind kind) {
+  switch (kind) {
+    case bsn::CALIBRATION_MAGNETOMETER:
+      return calib::CalibrationKind::magnetometer;
+    case bsn::CALIBRATION_GYRO_BIAS:
+      return calib::CalibrationKind::gyro_bias;
+    case bsn::CALIBRATION_ACCELEROMETER:
+      return calib::CalibrationKind::accelerometer;
+  }
+  return std::nullopt;
+}
+
+CalibrationService::CalibrationService(dds::Participant& participant, Options options)
+    : participant_(participant),
+      options_(std::move(options)),
+      store_(options_.store_dir.empty() ? default_calibration_store() : options_.store_dir) {
+  result_writer_ = participant_.make_writer(dds::kCalibrationResultTopic);
+  progress_writer_ = participant_.make_writer(dds::kCalibrationProgressTopic);
+  publish_stored();
+  // Readers last: their callbacks may fire as soon as they exist.
+  raw_reader_ =
+      participant_.make_reader(dds::kRawTopic, [this](const bsn::RawSample& raw, const auto&) { on_raw(raw); });
+  request_reader_ = participant_.make_reader(dds::kCalibrationRequestTopic,
+                                             [this](const bsn::CalibrationRequest& r, const auto&) { on_request(r); });
+}
+
+CalibrationService::~CalibrationService() {
+  // Stop the callbacks first, then tell the clients of requests still running.
+  request_reader_.reset();
+  raw_reader_.reset();
+  std::lock_guard lock(mutex_);
+  std::vector<std::string> ids;
+  for (const auto& [id, run] : runs_) ids.push_back(id);
+  for (const std::string& id : ids) finish(id, dds::monotonic_ns(), "the calibration service stopped");
+}
+
+std::size_t CalibrationService::running() const {
+  std::lock_guard lock(mutex_);
+  return runs_.size();
+}
+
+void CalibrationService::publish_stored() {
+  std::vector<std::string> problems;
+  const std::vector<StoredCalibration> stored = store_.load_all(problems);
+  for (const std::string& p : problems) logging::log_warn(p, "; that calibration is skipped");
+  for (const StoredCalibration& s : stored) {
+    bsn::CalibrationResult m;
+    m.node_id(s.node);
+    m.request_id(s.document.request_id.empty() ? "stored" : s.document.request_id);
+    m.kind(to_wire(s.kind));
+    m.success(true);
+    const calib::SensorCalibration& c = s.document.calibration;
+    const calib::ChannelCalibration& ch = s.kind == calib::CalibrationKind::magnetometer    ? *c.magnetometer
+                                          : s.kind == calib::CalibrationKind::accelerometer ? *c.accelerometer
+                                                                                            : *c.gyroscope;
+    m.bias(arr(ch.bias));
+    m.transform(arr(ch.transform));
+    if (s.kind == calib::CalibrationKind::magnetometer) {
+      m.field_magnitude(s.document.magnetometer_field_magnitude);
+      m.field_vector(arr(s.document.magnetometer_field_vector));
+    } else if (s.kind == calib::CalibrationKind::accelerometer) {
+      m.field_magnitude(s.document.accelerometer_field_magnitude);
+    }
+    m.message("from the store: " + s.path);
+    result_writer_->write(m);
+    last_success_[{s.node, static_cast<int>(s.kind)}] = m;
+  }
+  logging::log_info("calibration store ", store_.dir(), ": ", stored.size(), " calibrations published",
+                    problems.empty() ? "" : ", ", problems.empty() ? "" : std::to_string(problems.size()),
+                    problems.empty() ? "" : " files skipped");
+}
+
+void CalibrationService::refuse(const std::string& request_id, const std::string& why) {
+  logging::log_warn("request '", request_id, "' refused: ", why);
+  bsn::CalibrationProgress p;
+  p.request_id(request_id);
+  p.phase(bsn::CALIBRATION_PHASE_REFUSED);
+  p.fraction(0.0);
+  p.seconds_left(0.0);
+  p.message(why);
+  progress_writer_->write(p);
+}
+
+void CalibrationService::on_request(const bsn::CalibrationRequest& request) {
+  std::lock_guard lock(mutex_);
+  const std::uint64_t now = dds::monotonic_ns();
+  const std::string& id = request.request_id();
+  if (request.cancel()) {
+    if (runs_.count(id) == 0) {
+      logging::log_info("cancel of request '", id, "', which is not running; ignored");
+      return;
+    }
+    logging::log_info("request '", id, "' cancelled by its requester");
+    finish(id, now, "cancelled by the requester");
+    return;
+  }
+  if (id.empty()) {
+    refuse(id, "the request has no request_id");
+    return;
+  }
+  if (!answered_.insert(id).second) {
+    logging::log_info("request '", id, "' arrived again; it is answered once, this copy is ignored");
+    return;
+  }
+  const std::optional<calib::CalibrationKind> kind = from_wire(request.kind());
+  if (!kind) {
+    refuse(id, "unknown kind " + std::to_string(static_cast<int>(request.kind())) +
+                   " (known: 0 magnetometer, 1 gyro bias, 2 accelerometer)");
+    return;
+  }
+  calib::SessionParams params;
+  params.kind = *kind;
+  params.duration_s = request.duration_s();
+  params.sample_count = request.sample_count();
+  params.until_good = request.until_good();
+  if (request.field_magnitude() != 0.0) params.field_magnitude = request.field_magnitude();
+  if (const std::string why = calib::validate(params); !why.empty()) {
+    refuse(id, why);
+    return;
+  }
+  std::vector<std::string> nodes;
+  if (request.node_id() == "*") {
+    for (const auto& [node, at] : heard_)
+      if (seconds_between(at, now) <= options_.active_node_window_s) nodes.push_back(node);
+    std::sort(nodes.begin(), nodes.end());
+    if (nodes.empty()) {
+      refuse(id, "node '*': no node has published on bsn/raw within the last " +
+                     std::to_string(options_.active_node_window_s) + " s");
+      return;
+    }
+  } else {
+    nodes = split_nodes(request.node_id());
+    if (nodes.empty()) {
+      refuse(id, "the request names no node (node_id is empty)");
+      return;
+    }
+  }
+  for (const std::string& node : nodes) {
+    if (node.size() > kMaxNodeIdLength) {
+      refuse(id, "node id '" + node.substr(0, 20) + "...' is longer than 63 characters");
+      return;
+    }
+    if (const auto b = busy_.find(node); b != busy_.end()) {
+      refuse(id, "node '" + node + "' is being calibrated by request '" + b->second + "'; wait for its result");
+      return;
+    }
+  }
+  Run run;
+  run.id = id;
+  run.kind = *kind;
+  run.start_ns = now;
+  run.last_progress_ns = 0;
+  std::string list;
+  for (const std::string& node : nodes) {
+    run.nodes.push_back({node, calib::CalibrationSession(params, now), {}});
+    busy_[node] = id;
+    list += (list.empty() ? "" : ", ") + node;
+  }
+  logging::log_info("request '", id, "': ", calib::kind_name(*kind), " of ", list, " (",
+                    params.duration_s > 0 ? std::to_string(params.duration_s) + " s" : std::string("no time limit"),
+                    params.sample_count > 0 ? ", " + std::to_string(params.sample_count) + " samples" : std::string(),
+                    params.until_good ? ", until good enough" : "", ")");
+  auto& stored = runs_[id] = std::move(run);
+  publish_progress(stored, now);
+}
+
+void CalibrationService::on_raw(const bsn::RawSample& raw) {
+  std::lock_guard lock(mutex_);
+  const std::uint64_t now = dds::monotonic_ns();
+  heard_[raw.node_id()] = now;
+  const auto b = busy_.find(raw.node_id());
+  if (b == busy_.end()) return;
+  const std::string request_id = b->second;  // a copy: finish() erases the entry
+  Run& run = runs_.at(request_id);
+  bool all_over = true;
+  for (NodeRun& n : run.nodes) {
+    if (n.node == raw.node_id()) n.session.add(to_session_sample(raw), now);
+    all_over = all_over && n.session.collection_over(now);
+  }
+  // The last sample of a sample_count collection: fit at once, from this thread, for the lowest latency.
+  if (all_over) finish(request_id, now);
+}
+
+void CalibrationService::tick() {
+  std::lock_guard lock(mutex_);
+  const std::uint64_t now = dds::monotonic_ns();
+  std::vector<std::string> over;
+  for (auto& [id, run] : runs_) {
+    if (seconds_between(run.last_progress_ns, now) >= options_.progress_period_s) publish_progress(run, now);
+    const bool all_over = std::all_of(run.nodes.begin(), run.nodes.end(),
+                                      [now](const NodeRun& n) { return n.session.collection_over(now); });
+    if (all_over) over.push_back(id);
+  }
+  for (const std::string& id : over) finish(id, now);
+}
+
+void CalibrationService::publish_progress(Run& run, std::uint64_t now) {
+  bsn::CalibrationProgress p;
+  p.request_id(run.id);
+  bool started = false;
+  double fraction = 1.0;
+  double seconds_left = -1.0;
+  const NodeRun* behind = nullptr;  // the node furthest from done sets the instruction of all (turned as one)
+  for (NodeRun& n : run.nodes) {
+    n.last_progress = n.session.progress(now);
+    const calib::SessionProgress& s = n.last_progress;
+    started = started || s.started;
+    if (behind == nullptr || s.fraction < fraction) behind = &n;
+    fraction = std::min(fraction, s.fraction);
+    seconds_left = std::max(seconds_left, s.seconds_left);
+    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
+    np.node_id(n.node);
+    np.samples(static_cast<std::uint32_t>(s.samples));
+    np.poses(static_cast<std::uint32_t>(s.poses));
+    np.octants(static_cast<std::uint32_t>(s.octants));
+    np.sphere_coverage(s.sphere_coverage);
+    np.instruction(s.instruction);
+  }
+  p.phase(started ? bsn::CALIBRATION_PHASE_COLLECTING : bsn::CALIBRATION_PHASE_WAITING);
+  p.elapsed_s(seconds_between(run.start_ns, now));
+  p.seconds_left(seconds_left);
+  p.fraction(fraction);
+  if (behind != nullptr) p.instruction(behind->last_progress.instruction);
+  progress_writer_->write(p);
+  run.last_progress_ns = now;
+}
+
+void CalibrationService::publish_done(const Run& run, std::size_t succeeded) {
+  bsn::CalibrationProgress p;
+  p.request_id(run.id);
+  p.phase(bsn::CALIBRATION_PHASE_DONE);
+  p.elapsed_s(seconds_between(run.start_ns, dds::monotonic_ns()));
+  p.seconds_left(0.0);
+  p.fraction(1.0);
+  p.instruction("done: " + std::to_string(succeeded) + " of " + std::to_string(run.nodes.size()) + " nodes calibrated");
+  for (const NodeRun& n : run.nodes) {
+    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
+    np.node_id(n.node);
+    np.samples(static_cast<std::uint32_t>(n.session.samples()));
+    np.poses(static_cast<std::uint32_t>(n.last_progress.poses));
+    np.octants(static_cast<std::uint32_t>(n.last_progress.octants));
+    np.sphere_coverage(n.last_progress.sphere_coverage);
+    np.instruction(n.last_progress.instruction);
+  }
+  progress_writer_->write(p);
+}
+
+void CalibrationService::finish(const std::string& request_id, std::uint64_t now, const std::string& abort_reason) {
+  const auto it = runs_.find(request_id);
+  if (it == runs_.end()) return;
+  Run run = std::move(it->second);
+  runs_.erase(it);
+  std::vector<std::pair<const NodeRun*, calib::SessionResult>> to_store;
+  for (const NodeRun& n : run.nodes) {
+    busy_.erase(n.node);
+    calib::SessionResult r;
+    if (abort_reason.empty()) {
+      r = n.session.finish();
+    } else {
+      r.kind = run.kind;
+      r.samples = n.session.samples();
+      r.message = abort_reason;
+    }
+    if (!r.success) {
+      const double waited = seconds_between(run.start_ns, now);
+      if (r.message == "no sample arrived")
+        r.message = "no sample arrived within " + std::to_string(waited).substr(0, 4) + " s";
+      r.message = "node '" + n.node + "': " + r.message;
+      logging::log_warn("request '", run.id, "': ", r.message);
+    }
+    bsn::CalibrationResult m = result_message(n.node, run.id, r);
+    m.message(r.message);
+    result_writer_->write(m);
+    const std::pair<std::string, int> key{n.node, static_cast<int>(run.kind)};
+    if (r.success) {
+      last_success_[key] = m;
+      to_store.emplace_back(&n, std::move(r));
+    } else if (const auto good = last_success_.find(key); good != last_success_.end()) {
+      // The latched sample of (node, kind) is the calibration in effect for late joiners, not the failure.
+      result_writer_->write(good->second);
+    }
+  }
+  publish_done(run, to_store.size());
+  // Stored after every node's result is out: the store's fsync would delay each result by milliseconds.
+  for (auto& [n, r] : to_store) {
+    try {
+      const std::string path = store_.save(n->node, r, run.id);
+      logging::log_info("request '", run.id, "': node '", n->node, "' calibrated (", r.samples, " samples, ",
+                        r.field.quality.pose_count, " poses); stored in ", path);
+    } catch (const std::exception& e) {
+      // The fit is good and in effect; only its persistence failed: say so on the result too.
+      logging::log_error("request '", run.id, "': node '", n->node, "': ", e.what());
+      bsn::CalibrationResult& m = last_success_[{n->node, static_cast<int>(run.kind)}];
+      m.message(std::string("not stored: ") + e.what());
+      result_writer_->write(m);
+    }
+  }
+}
+
+namespace {
+
+struct CalibrationCommandOptions {
+  int domain = 0;
+  CalibrationService::Options service;
+};
+
+int run_calibration(const CalibrationCommandOptions& opt) {
+  DdsCommandFrame frame(opt.domain, "bsn calibration");
+  std::optional<CalibrationService> service;
+  try {
+    service.emplace(frame.participant(), opt.service);
+  } catch (const std::runtime_error& e) {
+    logging::log_error(e.what());
+    return 2;
+  }
+  logging::log_info("serving bsn/calibration/request in domain ", opt.domain);
+  const int exit_code = frame.run_ticks(std::chrono::milliseconds(20), [&service] {
+    service->tick();
+    return std::optional<int>();
+  });
+  service.reset();
+  logging::log_info("stopped");
+  return exit_code;
+}
+
+}  // namespace
+
+Command calibration_command() {
+  return {"calibration", "Calibration service: fits sensor calibrations on request over DDS", [](CLI::App* cmd) {
+            auto opt = std::make_shared<CalibrationCommandOptions>();
+            cmd->add_option("--store", opt->service.store_dir,
+                            "calibration store directory (default: $XDG_STATE_HOME/bsn/calibration or "
+                            "~/.local/state/bsn/calibration)");
+            cmd->add_option("--progress-period", opt->service.progress_period_s, "seconds between progress samples")
+                ->check(CLI::Range(0.02, 0.5))
+                ->capture_default_str();
+            add_domain_option(cmd, opt->domain);
+            return [opt] { return run_calibration(*opt); };
+          }};
+}
+
+}  // namespace bsn::services
