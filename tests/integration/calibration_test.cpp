@@ -153,7 +153,7 @@ class Calibration : public ProcessTest {
 };
 
 TEST_F(Calibration, LiveFitMatchesOfflineAndFixesTheHeadingOfARunningFusionWithinASecond) {
-  const int domain = test_domain(12);
+  const int domain = test_domain(41);
   const std::string d = std::to_string(domain);
   // 60 s of rest, the 30 poses (225 s), 100 s of rest; live at 20x (19 s). The collection of 28 500 samples ends
   // between the last pose and 60 s after it, however many of the first 60 s discovery costs.
@@ -260,7 +260,7 @@ TEST_F(Calibration, LiveFitMatchesOfflineAndFixesTheHeadingOfARunningFusionWithi
 }
 
 TEST_F(Calibration, SevenNodesInOneRequestFinishTogetherEachWithinTheBounds) {
-  const int domain = test_domain(13);
+  const int domain = test_domain(42);
   const std::string d = std::to_string(domain);
   // 15 s of rest (discovery), 12 poses of 3 s (54 s), 17 s of rest per node, every node its own hand-turned motion
   // (seed), at 6x (7 x 600 samples/s): 6900 samples end between the last pose and 15 s after it.
@@ -321,7 +321,7 @@ magnetic: {magnitude_ut: 49, dip_deg: 64}
 }
 
 TEST_F(Calibration, RefusalsASilentNodeAndDuplicateIdsAreAnsweredWithReasons) {
-  const int domain = test_domain(14);
+  const int domain = test_domain(43);
   CalibrationPeer peer(domain);
   start_service("service", domain);
   ASSERT_TRUE(peer.wait_for_service());
@@ -369,7 +369,7 @@ TEST_F(Calibration, RefusalsASilentNodeAndDuplicateIdsAreAnsweredWithReasons) {
 }
 
 TEST_F(Calibration, AStillSensorFailsWithTheReasonOfTheFit) {
-  const int domain = test_domain(15);
+  const int domain = test_domain(44);
   const std::string d = std::to_string(domain);
   write_file(dir() / "still.yaml", R"(name: still
 duration_s: 30
@@ -397,7 +397,7 @@ magnetic: {magnitude_ut: 49, dip_deg: 64}
 }
 
 TEST_F(Calibration, AKilledServiceIsReportedWithinTwoSecondsAndCtrlCCancels) {
-  const int domain = test_domain(16);
+  const int domain = test_domain(45);
   const std::string d = std::to_string(domain);
   CalibrationPeer peer(domain);
   start_service("service", domain);
@@ -448,7 +448,7 @@ TEST_F(Calibration, AKilledServiceIsReportedWithinTwoSecondsAndCtrlCCancels) {
 }
 
 TEST_F(Calibration, ARestartedServicePublishesItsStoreAgainAndALateFusionAppliesIt) {
-  const int domain = test_domain(17);
+  const int domain = test_domain(46);
   const std::string d = std::to_string(domain);
   std::filesystem::create_directories(dir() / "store");
   write_file(dir() / "store" / "imu.magnetometer.calib.yaml",
@@ -498,7 +498,7 @@ TEST_F(Calibration, ARestartedServicePublishesItsStoreAgainAndALateFusionApplies
 TEST_F(Calibration, FusionRefusesABodyFileCalibrationMadeForAnotherNode) {
   write_file(dir() / "imu.calib.yaml", "node: imu\nmagnetometer:\n  bias: [25, -15, 10]\n");
   write_file(dir() / "body.yaml", "segments:\n  - name: thigh_l\n    calibration: imu.calib.yaml\n");
-  spawn("fusion", {"fusion", "--body", (dir() / "body.yaml").string(), "--domain", std::to_string(test_domain(18))});
+  spawn("fusion", {"fusion", "--body", (dir() / "body.yaml").string(), "--domain", std::to_string(test_domain(47))});
   const auto st = child("fusion").wait_for(std::chrono::seconds(15));
   ASSERT_TRUE(st && WIFEXITED(*st)) << describe_status(st);
   EXPECT_EQ(WEXITSTATUS(*st), 2);
@@ -508,7 +508,7 @@ TEST_F(Calibration, FusionRefusesABodyFileCalibrationMadeForAnotherNode) {
 }
 
 TEST_F(Calibration, TheDemoShowsTheHeadingErrorBeforeAndAfter) {
-  spawn("demo", {"demo", "--calibrate", "--domain", std::to_string(test_domain(19))});
+  spawn("demo", {"demo", "--calibrate", "--domain", std::to_string(test_domain(48))});
   const auto st = child("demo").wait_for(std::chrono::seconds(90));
   ASSERT_TRUE(exited_cleanly(st)) << describe_status(st) << read_file(log_path("demo"));
   const std::string log = read_file(log_path("demo"));
