@@ -170,7 +170,7 @@ class MekfFilter final : public OrientationFilter {
   void set_reference(const Vec3& mag_earth);
   int classify(const ImuSample& s) const;
   void adapt(const ImuSample& s);
-  void update_accelerometer(const Vec3& acc, const MekfNoise& n);
+  void update_accelerometer(const Vec3& acc, const MekfNoise& n, bool keep_heading);
   void update_magnetometer(const ImuSample& s, const MekfNoise& n);
 
   Params params_;
