@@ -255,7 +255,8 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
       bool use = true;
       double scale = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
       if (params_.mag_rejection != 0.0) {
-        scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.mag_ref, s.has_gyr ? s.gyr.norm() : 0.0);
+        scale =
+            r_adaption_.update(s.timestamp_ns, s.mag, up, state_.mag_ref, s.has_gyr ? s.gyr.cross(up).norm() : 0.0, dt);
         use = std::isfinite(scale);
       }
       if (use) {

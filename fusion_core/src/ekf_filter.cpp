@@ -215,8 +215,8 @@ UpdateResult EkfFilter::step(const ImuSample& s, double dt) {
     } else {
       use_mag = true;
       if (params_.mag_rejection != 0.0) {
-        const double rate = s.has_gyr ? (s.gyr - state_.bias).norm() : 0.0;
-        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged, rate);
+        const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(up).norm() : 0.0;  // horizontal rate
+        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged, rate, dt);
         use_mag = std::isfinite(scale);
         if (use_mag) mag_variance_factor = scale;
         state_.flags.mag_rejected = !use_mag;

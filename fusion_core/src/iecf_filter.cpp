@@ -108,7 +108,7 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
     if (mag_squared_norm > 1e-18 && m_cross_a_squared_norm > 1e-6 * mag_squared_norm) {
       double mag_weight = 1.0;
       if (params_.mag_rejection != 0.0) {
-        mag_detector_.update(s.timestamp_ns, s.mag, up_est, rate.norm());
+        mag_detector_.update(s.timestamp_ns, s.mag, up_est, rate.cross(up_est).norm(), dt);  // horizontal rate
         mag_weight = mag_detector_.gain_factor();  // < 1 for a field used after a long rejection
       }
       if (params_.mag_rejection != 0.0 && !mag_detector_.usable()) {

@@ -100,9 +100,10 @@ void MagDisturbanceDetector::track_disturbance(std::uint64_t t_ns, double norm, 
   }
 }
 
-bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s) {
+bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s,
+                                    double dt_s) {
   const double norm = mag.norm();
-  if (!std::isfinite(norm) || !(norm > 1e-9) || !up.allFinite() || !std::isfinite(rate_rad_s)) {
+  if (!std::isfinite(norm) || !(norm > 1e-9) || !up.allFinite() || !std::isfinite(rate_rad_s) || !std::isfinite(dt_s)) {
     state_.disturbed = true;
     state_.inside_leave_band = false;
     return true;
@@ -111,7 +112,7 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
   if (!state_.reference_known) set_reference(norm, dip_angle(mag, up));
   state_.last_norm = norm;
   state_.last_down = down;
-  state_.dip_tolerance = lag_dip_tolerance(rate_rad_s, params_.mag_latency_s);
+  state_.dip_tolerance = lag_dip_tolerance(rate_rad_s, dt_s + params_.mag_latency_s);
 
   // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as sin(dip) = down / |m|
   // compared against the sines of the band limits (multiplied through by |m| > 0).

@@ -316,7 +316,7 @@ void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n, bool 
   state_.bias += dx.tail<3>();
 }
 
-void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
+void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n, double dt) {
   state_.flags.mag_rejected = false;
   if (state_.h_ref.isZero()) {
     // Initialised without a usable magnetometer: the first usable one sets the heading and the reference.
@@ -335,8 +335,8 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
   const Vec3 r3 = to_sensor.col(2);  // earth vertical in the sensor frame
   double mag_variance_factor = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
   if (params_.mag_rejection != 0.0) {
-    const double rate = s.has_gyr ? (s.gyr - state_.bias).norm() : 0.0;
-    mag_variance_factor = r_adaption_.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged, rate);
+    const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(r3).norm() : 0.0;  // horizontal rate
+    mag_variance_factor = r_adaption_.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged, rate, dt);
     if (!std::isfinite(mag_variance_factor)) {
       state_.flags.mag_rejected = true;
       return;
@@ -411,7 +411,7 @@ UpdateResult MekfFilter::step(const ImuSample& s, double dt) {
 
   // Update step 2: the magnetometer corrects the yaw only.
   if (s.has_mag) {
-    update_magnetometer(s, n);
+    update_magnetometer(s, n, dt);
   } else {
     state_.flags.mag_rejected = false;
   }

@@ -46,12 +46,12 @@ MagneticRAdaption::Reference MagneticRAdaption::Reference::of(const Vec3& m, con
 }
 
 double MagneticRAdaption::update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref,
-                                 double rate_rad_s) {
+                                 double rate_rad_s, double dt_s) {
   const double m_norm = m.norm();
   const double s = sine_of_dip(m, up, m_norm);
   // cos(dip - dip_ref) from both sines (both cosines are >= 0).
   const double cos_dev = std::sqrt(std::max(0.0, 1.0 - s * s)) * ref.cos_dip + s * ref.sin_dip;
-  const double tolerance = lag_dip_tolerance(rate_rad_s, params_.latency_s);
+  const double tolerance = lag_dip_tolerance(rate_rad_s, (std::isfinite(dt_s) ? dt_s : 0.0) + params_.latency_s);
   double factor = 0.0;
   if (tolerance > 0.0 && std::isfinite(tolerance) && cos_dev < cos_dip_exit_) {
     // Turning, and outside the inner dip band: judge on the angle with both thresholds widened by the lag.

@@ -243,7 +243,7 @@ bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const 
   }
   // Disturbed readings are skipped, unless the rejection has lasted so long that the detector lets them in with a
   // reduced gain (the heading must not drift for ever).
-  mag_detector_.update(t_ns, mag, up, rate_rad_s);
+  mag_detector_.update(t_ns, mag, up, rate_rad_s, static_cast<double>(t_ns - clock().last_ns) * 1e-9);
   return !mag_detector_.usable();
 }
 
@@ -297,7 +297,10 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
   if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
     correct_acc(coeff_.acc_lowpass ? lowpass_acc(s.acc, dt) : s.acc, dt);
   }
-  if (s.has_mag) correct_mag(s, s.has_gyr ? (s.gyr - state_.gyro_bias).norm() : 0.0);
+  // Only the horizontal part of the rate turns the field's dip (a turn about the vertical keeps it).
+  if (s.has_mag) {
+    correct_mag(s, s.has_gyr ? (s.gyr - state_.gyro_bias).cross(earth_axis_in_sensor(state_.q, 2)).norm() : 0.0);
+  }
   state_.q = renormalised(state_.q);
   const double max_bias = params_.max_gyro_bias_rad_s;
   state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);

@@ -9,8 +9,9 @@
 // (issue 12; the last two after Laidig & Seel's VQF, 2023):
 //   - rate tolerance: a magnetometer reading lags the gyro (it is sampled before it, or averages over its own
 //     bandwidth), so while the sensor turns at |w| the field it reports is the field of an orientation |w| * latency
-//     ago and its dip, seen with the current vertical, is off by up to |w| * mag_latency_s. Both dip thresholds are
-//     widened by that much (at 1000 deg/s and 20 ms: 20 deg); the magnitude, which a lag does not change, is not;
+//     ago (one sample, plus its own averaging delay) and its dip, seen with the current vertical, is off by up to |w| *
+//     mag_latency_s. Both dip thresholds are widened by that much (at 1000 deg/s and 20 ms: 20 deg); the magnitude,
+//     which a lag does not change, is not;
 //   - a new field: a disturbance whose field stays the same (within the enter thresholds of the first reading of
 //     the run) for mag_max_rejection_s becomes the new reference: a wrong reference (a start next to a magnet, a
 //     room whose field differs from where the filter started) would otherwise shut the magnetometer out for good,
@@ -74,11 +75,12 @@ class MagDisturbanceDetector {
     double mag_dip_leave_rad = 0.07;
     /// Both must stay inside the leave band this long before the field is trusted again, s. Default 1 s.
     double mag_min_clean_s = 1.0;
-    /// Largest lag of a magnetometer reading behind the gyro that the dip test tolerates, s: both dip thresholds
-    /// are widened by |w| times this. Default 0.02 s: one sample at 100 Hz (a reading taken just before the gyro's)
-    /// plus the group delay of a magnetometer averaging at ~25 Hz (1 / (2 pi 25 Hz) = 6 ms), rounded up. The
-    /// simulated case (1000 deg/s, one sample of lag, 25 Hz bandwidth) needs >= 0.016 s to accept >= 95 %.
-    double mag_latency_s = 0.02;
+    /// The magnetometer's own delay behind the gyro beyond one sample, s: the dip test tolerates a lag of one
+    /// sample interval (a reading taken just before the gyro's) plus this, i.e. both dip thresholds widen by
+    /// |w_h| (dt + mag_latency_s). Default 0.0064 s: the group delay 1 / (2 pi f_c) of a magnetometer averaging
+    /// with a first-order corner f_c = 25 Hz (a part sampled at 100 Hz averages well below its 50 Hz Nyquist
+    /// limit). The simulated case (1000 deg/s, one sample of lag, 25 Hz bandwidth) is accepted on >= 95 % with it.
+    double mag_latency_s = 0.0064;
     /// A disturbance whose field stays the same for this long becomes the new reference field, s. Default 20 s
     /// (VQF's magNewTime; longer than any magnet held near a sensor in Fan's tests B and E).
     double mag_max_rejection_s = 20.0;
@@ -116,11 +118,11 @@ class MagDisturbanceDetector {
   /// Dip angle of the field m seen from a frame whose unit "up" is up, rad: asin(-(m . up) / |m|).
   static double dip_angle(const Vec3& m, const Vec3& up);
 
-  /// Feeds one magnetometer reading (sensor frame), the unit up direction in the same frame (e.g. from the
-  /// filter's current orientation, as in Fan's eq. 17) and the sensor's angular rate |w|, rad/s (0: no rate
-  /// tolerance). Returns disturbed(). A zero or non-finite field counts as disturbed; the first valid reading
-  /// after reset() becomes the reference.
-  bool update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s = 0.0);
+  /// Feeds one magnetometer reading (sensor frame), taken dt_s after the previous sample, the unit up direction in the
+  /// same frame (e.g. from the filter's current orientation, as in Fan's eq. 17) and the horizontal part of the
+  /// sensor's angular rate |w x up|, rad/s, the part that turns the dip (0: no rate tolerance). Returns disturbed(). A
+  /// zero or non-finite field counts as disturbed; the first valid reading after reset() becomes the reference.
+  bool update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s = 0.0, double dt_s = 0.0);
 
   /// True when the filter may use the reading: clean, or disturbed for longer than mag_accept_after_s.
   bool usable() const { return !state_.disturbed || state_.budget.spent(); }

@@ -34,10 +34,10 @@ class MagneticRAdaption {
     /// magnetometer is trusted again, s. Default 0.2 s: on the BROAD trials a longer wait (1 s) kept the
     /// magnetometer out for most of the fast trials and cost the Kalman filters several degrees of heading.
     double min_clean_s = 0.2;
-    /// Lag of the magnetometer behind the gyro that the dip test tolerates, s: both dip thresholds are widened by
-    /// |w| times this while the sensor turns (lag_dip_tolerance; the reason and default as mag_latency_s of
-    /// MagDisturbanceDetector::Params). Default 0.02 s.
-    double latency_s = 0.02;
+    /// The magnetometer's delay beyond one sample, s: both dip thresholds widen by |w_h| (dt + latency_s) while
+    /// the sensor turns (lag_dip_tolerance; reason and default as mag_latency_s of MagDisturbanceDetector::Params).
+    /// Default 0.0064 s.
+    double latency_s = 0.0064;
     /// After this much rejection (RejectionBudget) the magnetometer is used again with its variance multiplied by
     /// 1 / reduced_gain^2, so the heading error stays bounded, s. Default 60 s (VQF).
     double accept_after_s = 60.0;
@@ -70,7 +70,8 @@ class MagneticRAdaption {
   /// magnitude ratio |m| / ref.norm and the dip deviation, compared by its cosine. rate_rad_s = |w| widens the dip
   /// thresholds by lag_dip_tolerance(). After accept_after_s of rejection it returns 1 / reduced_gain^2 instead of
   /// infinity.
-  double update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref, double rate_rad_s = 0.0);
+  double update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref, double rate_rad_s = 0.0,
+                double dt_s = 0.0);
 
   /// True while the field is judged disturbed (including the clean waiting period).
   bool disturbed() const { return disturbed_; }
@@ -115,8 +116,8 @@ struct RAdaptionFilterParams {
   double mag_dip_exit_rad = 0.0873;
   double mag_min_clean_s = 0.2;
   /// The lag tolerance and the long-rejection rule of MagneticRAdaption::Params (latency_s, accept_after_s,
-  /// reduced_gain): 0.02 s, 60 s, 0.5.
-  double mag_latency_s = 0.02;
+  /// reduced_gain): 0.0064 s, 60 s, 0.5.
+  double mag_latency_s = 0.0064;
   double mag_accept_after_s = 60.0;
   double mag_reduced_gain = 0.5;
 
