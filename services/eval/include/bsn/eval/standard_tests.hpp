@@ -38,7 +38,7 @@ struct StandardTestResult {
   /// from the earth field by more than 10 %, and the fraction of them the filter rejected (NaN: none such).
   std::size_t disturbed_samples = 0;
   double caught_fraction = 0.0;
-  TrialResult trial;                   ///< the full scores and the error series (for --plot)
+  TrialResult trial;  ///< the full scores and the error series (for --plot)
 };
 
 /// Runs every filter in `filters` (label, spec) through every test, with the scenarios read from
