@@ -232,8 +232,14 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
     state_.gravity.correct(s.acc, coeff_.var_a);
   }
 
-  // Filter 2: geomagnetic field and magnetic disturbance.
-  state_.magnetic.predict(turn, gyro_var_dt, state_.decay_dist, coeff_.var_dist);
+  // Filter 2: geomagnetic field and magnetic disturbance. Before the first magnetometer sample it only carries
+  // earth north with the gyro: its covariance is restarted by initialise_magnetic() anyway, so a 6D stream pays
+  // for one rotation, not the 6x6 covariance prediction.
+  if (state_.have_mag) {
+    state_.magnetic.predict(turn, gyro_var_dt, state_.decay_dist, coeff_.var_dist);
+  } else {
+    state_.magnetic.x.head<3>() = turn * state_.magnetic.x.head<3>();
+  }
   state_.flags.mag_rejected = false;
   const Vec3 g = state_.gravity.vector();
   const double g_norm = g.norm();
@@ -247,12 +253,14 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
       }
     } else {
       bool use = true;
+      double scale = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
       if (params_.mag_rejection != 0.0) {
-        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.mag_ref);
+        scale =
+            r_adaption_.update(s.timestamp_ns, s.mag, up, state_.mag_ref, s.has_gyr ? s.gyr.cross(up).norm() : 0.0, dt);
         use = std::isfinite(scale);
       }
       if (use) {
-        state_.magnetic.correct(s.mag, coeff_.var_m);
+        state_.magnetic.correct(s.mag, coeff_.var_m * scale);
       } else {
         state_.flags.mag_rejected = true;
       }

@@ -194,6 +194,7 @@ UpdateResult EkfFilter::step(const ImuSample& s, double dt) {
 
   // Magnetometer: usable unless the R-adaption sets its variance to infinity.
   bool use_mag = false;
+  double mag_variance_factor = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
   state_.flags.mag_rejected = false;
   // One rotation matrix for every earth-to-sensor rotation below: its transpose maps earth to sensor.
   Mat3 to_sensor = state_.q.toRotationMatrix().transpose();
@@ -214,8 +215,10 @@ UpdateResult EkfFilter::step(const ImuSample& s, double dt) {
     } else {
       use_mag = true;
       if (params_.mag_rejection != 0.0) {
-        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged);
+        const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(up).norm() : 0.0;  // horizontal rate
+        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged, rate, dt);
         use_mag = std::isfinite(scale);
+        if (use_mag) mag_variance_factor = scale;
         state_.flags.mag_rejected = !use_mag;
       }
     }
@@ -230,14 +233,32 @@ UpdateResult EkfFilter::step(const ImuSample& s, double dt) {
     r.tail<3>() = s.mag - to_sensor * state_.h_ref;
     h.topRows<3>() = rotate_to_sensor_jacobian(state_.q, g_earth);
     h.bottomRows<3>() = rotate_to_sensor_jacobian(state_.q, state_.h_ref);
-    var << coeff_.var_a, coeff_.var_a, coeff_.var_a, coeff_.var_m, coeff_.var_m, coeff_.var_m;
+    const double var_m = coeff_.var_m * mag_variance_factor;
+    var << coeff_.var_a, coeff_.var_a, coeff_.var_a, var_m, var_m, var_m;
     correct<6>(r, h, var);
   } else if (use_acc || use_mag) {
     const Vec3 ref = use_acc ? g_earth : state_.h_ref;
     const Vec3 meas = use_acc ? s.acc : s.mag;
     const Mat34 h = rotate_to_sensor_jacobian(state_.q, ref);
     const Vec3 r = meas - to_sensor * ref;
-    correct<3>(r, h, Vec3::Constant(use_acc ? coeff_.var_a : coeff_.var_m));
+    const Quat q_before = state_.q;
+    const Vec3 bias_before = state_.bias;
+    correct<3>(r, h, Vec3::Constant(use_acc ? coeff_.var_a : coeff_.var_m * mag_variance_factor));
+    if (use_acc && s.has_mag && state_.flags.mag_rejected) {
+      // The accelerometer cannot see a rotation about the vertical; what it turns there comes from correlations in
+      // P, and with the magnetometer out nothing turns it back: under external accelerations the heading then
+      // drifts far faster than the gyro would (simulated translation at 1 g: 26 deg against 10 deg of gyro-only
+      // drift). So while the magnetometer is rejected the correction keeps the tilt part only: the rotation about
+      // the vertical and the bias change along it are removed.
+      const Quat d = q_before.conjugate() * state_.q;
+      Vec3 turn = (d.w() >= 0.0 ? 2.0 : -2.0) * d.vec();  // the (small) correction as a rotation vector
+      const Vec3 up_s = to_sensor.col(2);
+      turn -= turn.dot(up_s) * up_s;
+      state_.q = (q_before * exp_rotation_vector(turn)).normalized();
+      Vec3 db = state_.bias - bias_before;
+      db -= db.dot(up_s) * up_s;
+      state_.bias = bias_before + db;
+    }
   } else {
     state_.q = kalman_support::unit(state_.q);
   }

@@ -106,7 +106,12 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
     const Vec3 m_cross_a = s.mag.cross(a);
     const double m_cross_a_squared_norm = m_cross_a.squaredNorm();
     if (mag_squared_norm > 1e-18 && m_cross_a_squared_norm > 1e-6 * mag_squared_norm) {
-      if (params_.mag_rejection != 0.0 && mag_detector_.update(s.timestamp_ns, s.mag, up_est)) {
+      double mag_weight = 1.0;
+      if (params_.mag_rejection != 0.0) {
+        mag_detector_.update(s.timestamp_ns, s.mag, up_est, rate.cross(up_est).norm(), dt);  // horizontal rate
+        mag_weight = mag_detector_.gain_factor();  // < 1 for a field used after a long rejection
+      }
+      if (params_.mag_rejection != 0.0 && !mag_detector_.usable()) {
         mag_rejected = true;
       } else if (!state_.heading_known) {
         q = orientation_from_acc_mag(s.acc, s.mag);  // first heading after a start without magnetometer
@@ -120,7 +125,7 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
         const double weight = (state_.last_mag_ns == 0 || since_mag > max_gap_ns()) ? 1.0
                               : since_mag == dt_ns                                  ? 1.0
                                                    : static_cast<double>(since_mag) * 1e-9 / dt;
-        error += weight * east_measured.cross(east_predicted);  // e_m (virtual east, section 2.1.2)
+        error += (mag_weight * weight) * east_measured.cross(east_predicted);  // e_m (virtual east, section 2.1.2)
         mag_used = true;
       }
     } else if (use_magnetometer_ && s.has_mag) {

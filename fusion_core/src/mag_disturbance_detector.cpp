@@ -20,7 +20,15 @@ MagDisturbanceDetector::MagDisturbanceDetector(const Params& params) : params_(p
                                 ": a leave threshold must not exceed its enter threshold (mag_norm_leave <= "
                                 "mag_norm_enter, mag_dip_leave_rad <= mag_dip_enter_rad)");
   }
+  require_non_negative(kName, params.mag_latency_s, "mag_latency_s");
+  require_positive(kName, params.mag_max_rejection_s, "mag_max_rejection_s");
+  require_positive(kName, params.mag_accept_after_s, "mag_accept_after_s");
+  if (!(params.mag_reduced_gain >= 0.0 && params.mag_reduced_gain <= 1.0)) {
+    throw std::invalid_argument(std::string(kName) + ": parameter mag_reduced_gain must be in [0, 1], got " +
+                                std::to_string(params.mag_reduced_gain));
+  }
   min_clean_ns_ = seconds_to_ns(params.mag_min_clean_s);
+  max_rejection_ns_ = seconds_to_ns(params.mag_max_rejection_s);
 }
 
 double MagDisturbanceDetector::dip_angle(const Vec3& m, const Vec3& up) {
@@ -66,9 +74,36 @@ double MagDisturbanceDetector::last_dip_deviation() const {
   return std::abs(std::asin(std::clamp(state_.last_down / state_.last_norm, -1.0, 1.0)) - state_.ref_dip);
 }
 
-bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up) {
+void MagDisturbanceDetector::track_disturbance(std::uint64_t t_ns, double norm, double dip) {
+  const double dt =
+      state_.last_ns != 0 && t_ns > state_.last_ns ? static_cast<double>(t_ns - state_.last_ns) * 1e-9 : 0.0;
+  state_.budget.update(dt, state_.disturbed, params_.mag_accept_after_s);
+  if (!state_.disturbed) {
+    state_.candidate = false;
+    return;
+  }
+  // A field that stays the same (within the enter thresholds of the run's first reading) for mag_max_rejection_s
+  // becomes the new reference; a field that keeps changing never does.
+  if (!state_.candidate || std::abs(norm - state_.candidate_norm) > params_.mag_norm_enter * state_.candidate_norm ||
+      std::abs(dip - state_.candidate_dip) > params_.mag_dip_enter_rad + state_.dip_tolerance) {
+    state_.candidate = true;
+    state_.candidate_norm = norm;
+    state_.candidate_dip = dip;
+    state_.candidate_since_ns = t_ns;
+  } else if (t_ns - state_.candidate_since_ns >= max_rejection_ns_) {
+    set_reference(state_.candidate_norm, state_.candidate_dip);
+    state_.disturbed = false;
+    state_.inside_leave_band = true;
+    state_.inside_since_ns = t_ns;
+    state_.candidate = false;
+    state_.budget.update(0.0, false, params_.mag_accept_after_s);
+  }
+}
+
+bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s,
+                                    double dt_s) {
   const double norm = mag.norm();
-  if (!std::isfinite(norm) || !(norm > 1e-9) || !up.allFinite()) {
+  if (!std::isfinite(norm) || !(norm > 1e-9) || !up.allFinite() || !std::isfinite(rate_rad_s) || !std::isfinite(dt_s)) {
     state_.disturbed = true;
     state_.inside_leave_band = false;
     return true;
@@ -77,13 +112,27 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
   if (!state_.reference_known) set_reference(norm, dip_angle(mag, up));
   state_.last_norm = norm;
   state_.last_down = down;
+  state_.dip_tolerance = lag_dip_tolerance(rate_rad_s, dt_s + params_.mag_latency_s);
 
   // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as sin(dip) = down / |m|
   // compared against the sines of the band limits (multiplied through by |m| > 0).
-  const bool outside_enter_band = norm > bounds_.norm_enter_high || norm < bounds_.norm_enter_low ||
-                                  down > bounds_.sin_enter_high * norm || down < bounds_.sin_enter_low * norm;
-  const bool inside_leave_band = norm < bounds_.norm_leave_high && norm > bounds_.norm_leave_low &&
-                                 down < bounds_.sin_leave_high * norm && down > bounds_.sin_leave_low * norm;
+  const bool norm_outside_enter = norm > bounds_.norm_enter_high || norm < bounds_.norm_enter_low;
+  const bool norm_inside_leave = norm < bounds_.norm_leave_high && norm > bounds_.norm_leave_low;
+  bool dip_outside_enter = down > bounds_.sin_enter_high * norm || down < bounds_.sin_enter_low * norm;
+  bool dip_inside_leave = down < bounds_.sin_leave_high * norm && down > bounds_.sin_leave_low * norm;
+  auto dip_of_reading = [&] { return std::asin(std::clamp(down / norm, -1.0, 1.0)); };
+  double dip = 0.0;
+  bool dip_known = false;
+  if (state_.dip_tolerance > 0.0 && !dip_inside_leave) {
+    dip = dip_of_reading();
+    dip_known = true;
+    // Turning: the bands widened by the lag tolerance, on the angle itself.
+    const double dev = std::abs(dip - state_.ref_dip);
+    dip_outside_enter = dev > params_.mag_dip_enter_rad + state_.dip_tolerance;
+    dip_inside_leave = dev < params_.mag_dip_leave_rad + state_.dip_tolerance;
+  }
+  const bool outside_enter_band = norm_outside_enter || dip_outside_enter;
+  const bool inside_leave_band = norm_inside_leave && dip_inside_leave;
   if (!inside_leave_band) {
     state_.inside_leave_band = false;
   } else if (!state_.inside_leave_band || t_ns < state_.inside_since_ns) {
@@ -96,6 +145,9 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
   } else if (state_.disturbed && state_.inside_leave_band && t_ns - state_.inside_since_ns >= min_clean_ns_) {
     state_.disturbed = false;
   }
+  if (state_.disturbed && !dip_known) dip = dip_of_reading();  // the new-field rule needs it
+  track_disturbance(t_ns, norm, dip);
+  state_.last_ns = t_ns;
   return state_.disturbed;
 }
 

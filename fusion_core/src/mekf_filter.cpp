@@ -284,7 +284,7 @@ void MekfFilter::adapt(const ImuSample& s) {
   }
 }
 
-void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n) {
+void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n, bool keep_heading) {
   // H = [[z x] 0] and R = sigma_a^2 I (diagonal): the three rows are processed one at a time against the same
   // linearisation, which is the batch update K = P H^T S^-1, P <- P - K H P (Nez B.2) up to rounding, without
   // inverting S. Each row: P <- P - (P h^T)(P h^T)^T / s, symmetric by construction.
@@ -302,12 +302,21 @@ void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n) {
     dx += k * (residual(i) - h.dot(dx.head<3>()));
     state_.p.noalias() -= k * ph.transpose();
   }
+  if (keep_heading) {
+    // The accelerometer cannot see a rotation about the vertical (h is perpendicular to it); what dx turns there
+    // comes from correlations in P, and with the magnetometer out nothing turns it back, so under external
+    // accelerations the heading would drift faster than the gyro's own error. While the magnetometer is rejected
+    // only the tilt part is applied: the rotation about the vertical and the bias change along it are removed.
+    const Vec3 up = z_hat * (1.0 / kGravity);
+    dx.head<3>() -= dx.head<3>().dot(up) * up;
+    dx.tail<3>() -= dx.tail<3>().dot(up) * up;
+  }
   // Product of unit quaternions: unit up to rounding; update() normalises once at the end.
   state_.q = state_.q * exp_rotation_vector(dx.head<3>());
   state_.bias += dx.tail<3>();
 }
 
-void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
+void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n, double dt) {
   state_.flags.mag_rejected = false;
   if (state_.h_ref.isZero()) {
     // Initialised without a usable magnetometer: the first usable one sets the heading and the reference.
@@ -324,9 +333,11 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
   }
   const Mat3 to_sensor = state_.q.toRotationMatrix().transpose();
   const Vec3 r3 = to_sensor.col(2);  // earth vertical in the sensor frame
+  double mag_variance_factor = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
   if (params_.mag_rejection != 0.0) {
-    const double scale = r_adaption_.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged);
-    if (!std::isfinite(scale)) {
+    const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(r3).norm() : 0.0;  // horizontal rate
+    mag_variance_factor = r_adaption_.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged, rate, dt);
+    if (!std::isfinite(mag_variance_factor)) {
       state_.flags.mag_rejected = true;
       return;
     }
@@ -334,7 +345,7 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n) {
   const Vec3 z_hat = to_sensor * state_.h_ref;
   const Mat3 hm = skew(z_hat);
   const Mat3 p_att = state_.p.topLeftCorner<3, 3>();  // Suh: the covariance truncated to the attitude block
-  const double r = n.sigma_m * n.sigma_m;
+  const double r = n.sigma_m * n.sigma_m * mag_variance_factor;
   const Mat3 hm_p = hm * p_att;
   Mat3 s_m = hm_p * hm.transpose();
   s_m.diagonal().array() += r;
@@ -391,13 +402,16 @@ UpdateResult MekfFilter::step(const ImuSample& s, double dt) {
   state_.p.bottomRightCorner<3, 3>().diagonal().array() += blocks.q22;
 
   // Update step 1: the accelerometer corrects attitude and bias.
-  if (s.has_acc && s.acc.squaredNorm() > 1e-12) update_accelerometer(s.acc, n);
+  // The magnetometer's last decision (it is judged after this update): rejected means keep the heading.
+  if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
+    update_accelerometer(s.acc, n, s.has_mag && state_.flags.mag_rejected && params_.mag_rejection != 0.0);
+  }
   state_.w_prev = s.has_gyr ? Vec3(s.gyr - state_.bias) : Vec3::Zero();
   state_.have_w_prev = s.has_gyr;
 
   // Update step 2: the magnetometer corrects the yaw only.
   if (s.has_mag) {
-    update_magnetometer(s, n);
+    update_magnetometer(s, n, dt);
   } else {
     state_.flags.mag_rejected = false;
   }

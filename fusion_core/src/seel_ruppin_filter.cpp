@@ -25,7 +25,6 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"max_gyro_bias_rad_s", &P::max_gyro_bias_rad_s},
                                                {"mag_rejection", &P::mag_rejection},
                                                {"mag_reference_s", &P::mag_reference_s},
-                                               {"mag_max_rejection_s", &P::mag_max_rejection_s},
                                            }),
                                            bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
                                            rest_param_fields<P>(), timing_param_fields<P>());
@@ -38,7 +37,6 @@ const P& checked(const P& p) {
   require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
   require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
   require_positive(kName, p.mag_reference_s, "mag_reference_s");
-  require_positive(kName, p.mag_max_rejection_s, "mag_max_rejection_s");
   for (const auto& [value, name] :
        {std::pair{p.mag_rejection, "mag_rejection"}, std::pair{p.rest_bias_lowpass, "rest_bias_lowpass"}}) {
     if (value != 0.0 && value != 1.0) {
@@ -104,7 +102,6 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params)
   coeff_.bias_factor_acc = params.zeta * params.zeta / (160.0 * params.tau_acc_s);
   coeff_.bias_factor_mag = params.zeta * params.zeta / (160.0 * params.tau_mag_s);
   coeff_.mag_reference_ns = seconds_to_ns(params.mag_reference_s);
-  coeff_.mag_max_rejection_ns = seconds_to_ns(params.mag_max_rejection_s);
   coeff_.acc_clip_test = params.max_acc_error_rad < std::numbers::pi;
   coeff_.sin_max_acc_error = std::sin(params.max_acc_error_rad);
   coeff_.cos_max_acc_error = std::cos(params.max_acc_error_rad);
@@ -118,15 +115,19 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params)
 void SeelRuppinFilter::LowPassCache::update(double dt, double fc_hz) {
   if (dt == cached_dt) return;
   cached_dt = dt;
-  // Bilinear transform with pre-warping of a second-order Butterworth low-pass.
-  const double w = std::tan(std::numbers::pi * fc_hz * dt);
-  const double w2 = w * w;
-  const double norm = 1.0 / (1.0 + std::numbers::sqrt2 * w + w2);
-  b0 = w2 * norm;
-  b1 = 2.0 * b0;
-  b2 = b0;
-  a1 = 2.0 * (w2 - 1.0) * norm;
-  a2 = (1.0 - std::numbers::sqrt2 * w + w2) * norm;
+  // The second-order Butterworth low-pass y'' = w0^2 (u - y) - sqrt(2) w0 y' as a continuous state (y, y') in
+  // physical units, stepped exactly over dt with the input held: (y - u, y') <- Phi (y - u, y') with
+  // Phi = exp(A dt), A = [0 1; -w0^2 -sqrt(2) w0]. Its poles are -s +- i s with s = w0 / sqrt(2), so
+  // Phi = e^(-s dt) [cos + sin, sin / s; -2 s sin, cos - sin] (of s dt). The state does not depend on dt, so a
+  // sensor that changes its rate keeps the filtered value; a difference-equation form (whose delay states are
+  // scaled by the coefficients of one rate) would turn a rate step into a transient of many degrees.
+  const double s = 2.0 * std::numbers::pi * fc_hz / std::numbers::sqrt2;
+  const double decay = std::exp(-s * dt);
+  const double c = std::cos(s * dt), sn = std::sin(s * dt);
+  p00 = decay * (c + sn);
+  p01 = decay * sn / s;
+  p10 = -decay * 2.0 * s * sn;
+  p11 = decay * (c - sn);
 }
 
 Vec3 SeelRuppinFilter::lowpass_acc(const Vec3& acc, double dt) {
@@ -139,14 +140,14 @@ Vec3 SeelRuppinFilter::lowpass_acc(const Vec3& acc, double dt) {
     state_.acc_lp_warmup_s += dt;
     state_.acc_lp_count += 1.0;
     state_.acc_lp_mean += (x - state_.acc_lp_mean) / state_.acc_lp_count;
-    state_.acc_lp_s1 = (1.0 - acc_lp_.b0) * state_.acc_lp_mean;
-    state_.acc_lp_s2 = (acc_lp_.b2 - acc_lp_.a2) * state_.acc_lp_mean;
+    state_.acc_lp_y = state_.acc_lp_mean;
+    state_.acc_lp_rate = Vec3::Zero();
     return state_.q_gyr.conjugate()._transformVector(state_.acc_lp_mean);
   }
-  const Vec3 y = acc_lp_.b0 * x + state_.acc_lp_s1;
-  state_.acc_lp_s1 = acc_lp_.b1 * x - acc_lp_.a1 * y + state_.acc_lp_s2;
-  state_.acc_lp_s2 = acc_lp_.b2 * x - acc_lp_.a2 * y;
-  return state_.q_gyr.conjugate()._transformVector(y);
+  const Vec3 offset = state_.acc_lp_y - x;
+  state_.acc_lp_y = x + acc_lp_.p00 * offset + acc_lp_.p01 * state_.acc_lp_rate;
+  state_.acc_lp_rate = acc_lp_.p10 * offset + acc_lp_.p11 * state_.acc_lp_rate;
+  return state_.q_gyr.conjugate()._transformVector(state_.acc_lp_y);
 }
 
 double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
@@ -171,7 +172,7 @@ UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
   const bool mag_usable = initial->with_mag;
   state_.q = initial->q;
   state_.q_gyr = Quat::Identity();
-  state_.acc_lp_s1 = state_.acc_lp_s2 = Vec3::Zero();
+  state_.acc_lp_y = state_.acc_lp_rate = Vec3::Zero();
   state_.acc_lp_warmup_s = 0.0;
   state_.acc_lp_count = 1.0;  // the start-up mean begins with this sample (q_gyr = identity)
   state_.acc_lp_mean = s.acc;
@@ -223,10 +224,9 @@ void SeelRuppinFilter::start_mag_reference(std::uint64_t t_ns) {
   state_.mag_learning = true;
   state_.mag_learning_since_ns = t_ns;
   state_.mag_norm_sum = state_.mag_dip_sum = state_.mag_learning_count = 0.0;
-  state_.mag_candidate_since_ns = 0;
 }
 
-bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up) {
+bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s) {
   if (state_.mag_learning) {
     // Learn only once the start-up is over: the dip needs a converged vertical.
     if (state_.flags.initialising) return false;
@@ -241,34 +241,17 @@ bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const 
     }
     return false;
   }
-  if (!mag_detector_.update(t_ns, mag, up)) {
-    state_.mag_candidate_since_ns = 0;
-    return false;
-  }
-  // Disturbed. A field that stays the same (within the leave band of the first reading of the run) for
-  // mag_max_rejection_s becomes the new reference; a field that keeps changing (a magnet moving with or near
-  // the sensor) never does.
-  const double norm = mag.norm();
-  const double dip = MagDisturbanceDetector::dip_angle(mag, up);
-  if (state_.mag_candidate_since_ns == 0 ||
-      std::abs(norm - state_.mag_candidate_norm) > params_.mag_norm_enter * state_.mag_candidate_norm ||
-      std::abs(dip - state_.mag_candidate_dip) > params_.mag_dip_enter_rad) {
-    state_.mag_candidate_norm = norm;
-    state_.mag_candidate_dip = dip;
-    state_.mag_candidate_since_ns = t_ns;
-  } else if (t_ns - state_.mag_candidate_since_ns >= coeff_.mag_max_rejection_ns) {
-    mag_detector_.reset();
-    mag_detector_.set_reference(state_.mag_candidate_norm, state_.mag_candidate_dip);
-    state_.mag_candidate_since_ns = 0;
-  }
-  return true;
+  // Disturbed readings are skipped, unless the rejection has lasted so long that the detector lets them in with a
+  // reduced gain (the heading must not drift for ever).
+  mag_detector_.update(t_ns, mag, up, rate_rad_s, static_cast<double>(t_ns - clock().last_ns) * 1e-9);
+  return !mag_detector_.usable();
 }
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
 // magnetometer turns the heading only.
-void SeelRuppinFilter::correct_mag(const ImuSample& s) {
+void SeelRuppinFilter::correct_mag(const ImuSample& s, double rate_rad_s) {
   const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);
-  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, s.mag, r_acc)) {
+  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, s.mag, r_acc, rate_rad_s)) {
     state_.flags.mag_rejected = true;
     return;
   }
@@ -287,9 +270,10 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s) {
                             : static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
   // During the start-up the heading converges as fast as the tilt: an initial heading taken with a wrong
   // vertical (a start in motion) is wrong too.
-  const double k = !state_.heading_known       ? 1.0
-                   : state_.flags.initialising ? start_mag_gain_.gain(dt_mag, coeff_.tau_start_mag_14)
-                                               : mag_gain_.gain(dt_mag, coeff_.tau_mag_14);
+  const double k_full = !state_.heading_known       ? 1.0
+                        : state_.flags.initialising ? start_mag_gain_.gain(dt_mag, coeff_.tau_start_mag_14)
+                                                    : mag_gain_.gain(dt_mag, coeff_.tau_mag_14);
+  const double k = params_.mag_rejection != 0.0 ? k_full * mag_detector_.gain_factor() : k_full;
   state_.q = state_.q * exp_rotation_vector(k * alpha * r_acc);  // eq. 12 (normalised once per update)
   if (state_.heading_known && !state_.flags.initialising) {
     state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
@@ -313,7 +297,10 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
   if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
     correct_acc(coeff_.acc_lowpass ? lowpass_acc(s.acc, dt) : s.acc, dt);
   }
-  if (s.has_mag) correct_mag(s);
+  // Only the horizontal part of the rate turns the field's dip (a turn about the vertical keeps it).
+  if (s.has_mag) {
+    correct_mag(s, s.has_gyr ? (s.gyr - state_.gyro_bias).cross(earth_axis_in_sensor(state_.q, 2)).norm() : 0.0);
+  }
   state_.q = renormalised(state_.q);
   const double max_bias = params_.max_gyro_bias_rad_s;
   state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bsn/eval/evaluation.hpp"
+#include "bsn/eval/standard_tests.hpp"
 #include "bsn/io/recording.hpp"
 #include "tools.hpp"
 
@@ -19,6 +20,8 @@ struct EvalOptions {
   std::vector<std::string> filters;  ///< "name" or "name:key=value,...", or "all"; empty = all
   bool json = false;                 ///< print the JSON object instead of the table
   std::string plot_path;             ///< write an SVG of error over time here ("" = no plot)
+  bool standard_tests = false;       ///< run Fan et al. 2018's tests A-E on the simulator instead of recordings
+  std::string scenario_dir = BSN_SCENARIO_DIR;  ///< where fan_a..fan_e.yaml are
 };
 
 namespace fs = std::filesystem;
@@ -89,6 +92,46 @@ int run_eval(const EvalOptions& opt) {
     return 2;
   }
 
+  if (opt.standard_tests) {
+    if (!opt.inputs.empty()) {
+      std::fprintf(stderr, "bsn eval: error: --standard-tests runs the shipped scenarios and takes no recordings\n");
+      return 2;
+    }
+    std::vector<eval::StandardTestResult> results;
+    try {
+      results = eval::run_standard_tests(opt.scenario_dir, filters);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+      return 2;
+    }
+    std::fputs(opt.json ? eval::standard_tests_json(results).c_str() : eval::standard_tests_table(results).c_str(),
+               stdout);
+    int exit_code = 0;
+    std::vector<eval::TrialResult> trials;
+    for (const auto& r : results) {
+      trials.push_back(r.trial);
+      if (r.trial.non_finite > 0) {
+        std::fprintf(stderr, "bsn eval: error: %s gave %zu non-finite orientations in test %s\n", r.filter.c_str(),
+                     r.trial.non_finite, r.test.c_str());
+        exit_code = 1;
+      }
+    }
+    if (!opt.plot_path.empty()) {
+      std::ofstream out(opt.plot_path);
+      out << eval::to_svg(trials);
+      if (!out) {
+        std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
+        return 1;
+      }
+      if (!opt.json) std::printf("plot: %s\n", opt.plot_path.c_str());
+    }
+    return exit_code;
+  }
+  if (opt.inputs.empty()) {
+    std::fprintf(stderr, "bsn eval: error: name recordings (files or folders), or give --standard-tests\n");
+    return 2;
+  }
+
   std::vector<fs::path> files;
   try {
     files = expand_inputs(opt.inputs);
@@ -147,12 +190,15 @@ int run_eval(const EvalOptions& opt) {
 Command eval_command() {
   return {"eval", "Score filters against the reference of recordings (BROAD HDF5, CSV)", [](CLI::App* cmd) {
             auto opt = std::make_shared<EvalOptions>();
-            cmd->add_option("inputs", opt->inputs, "recordings (.hdf5 in BROAD layout, .csv) or folders of them")
-                ->required();
+            cmd->add_option("inputs", opt->inputs, "recordings (.hdf5 in BROAD layout, .csv) or folders of them");
             cmd->add_option("--filter", opt->filters, "NAME or NAME:key=value,...; repeatable; 'all' = every filter")
                 ->take_all();
             cmd->add_flag("--json", opt->json, "print one JSON object instead of the table");
             cmd->add_option("--plot", opt->plot_path, "write an SVG image of the total error over time per filter");
+            cmd->add_flag("--standard-tests", opt->standard_tests,
+                          "run Fan et al. 2018's tests A-E on the simulator and print their Table 5 with grades");
+            cmd->add_option("--scenarios", opt->scenario_dir, "folder of fan_a..fan_e.yaml for --standard-tests")
+                ->capture_default_str();
             return [opt] { return run_eval(*opt); };
           }};
 }

@@ -52,6 +52,7 @@ TrialResult run_trial(const io::Recording& rec, const std::string& trial, const 
   const std::size_t stride =
       std::max<std::size_t>(1, (n + max_series_points - 1) / std::max<std::size_t>(1, max_series_points));
   const bool has_ref = rec.opt_quat.rows() > 0;
+  bool scored_any = false;
   for (std::size_t i = 0; i < n; ++i) {
     if (filter->update(rec.sample(i)) == fusion::UpdateResult::kRejected) ++result.rejected;
     const fusion::Quat q = filter->orientation();
@@ -67,6 +68,8 @@ TrialResult run_trial(const io::Recording& rec, const std::string& trial, const 
         const fusion::ErrorAngles e = fusion::error_angles(q, fusion::Quat(r(0), r(1), r(2), r(3)));
         acc.add(e);
         err_deg = e.total * kDeg;
+        if (!scored_any) result.unscored_until_s = static_cast<double>(rec.time_ns(i)) * 1e-9;
+        scored_any = true;
       }
     }
     if (i % stride == 0) {
@@ -167,8 +170,28 @@ std::string to_table(const std::vector<TrialResult>& results) {
   return out;
 }
 
+namespace {
+
+// A "nice" tick step (1, 2 or 5 times a power of ten) giving about `count` ticks over `span`.
+double tick_step(double span, double count) {
+  const double raw = span / count;
+  const double power = std::pow(10.0, std::floor(std::log10(raw)));
+  for (const double m : {1.0, 2.0, 5.0}) {
+    if (m * power >= raw) return m * power;
+  }
+  return 10.0 * power;
+}
+
+std::string tick_label(double v, double step) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.*f", step < 1.0 ? static_cast<int>(std::ceil(-std::log10(step))) : 0, v);
+  return buf;
+}
+
+}  // namespace
+
 std::string to_svg(const std::vector<TrialResult>& results) {
-  // Panels: one per trial, in order of first appearance; lines: one colour per filter.
+  // Panels: one per trial, in order of first appearance; lines: one colour and dash pattern per filter.
   std::vector<std::string> trials, filters;
   for (const auto& r : results) {
     if (std::find(trials.begin(), trials.end(), r.trial) == trials.end()) trials.push_back(r.trial);
@@ -176,47 +199,81 @@ std::string to_svg(const std::vector<TrialResult>& results) {
   }
   static constexpr const char* kColours[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd",
                                              "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22", "#17becf"};
-  const double width = 900, panel_h = 180, left = 60, right = 20, gap = 50;
-  const double top = 30 + 16.0 * static_cast<double>(filters.size());  // one legend line per filter
-  const double height = top + static_cast<double>(trials.size()) * (panel_h + gap) + 20;
+  static constexpr const char* kDashes[] = {"", "6,3", "2,2", "8,3,2,3"};
+  auto style = [&](std::size_t f) {
+    std::string st = std::string("stroke=\"") + kColours[f % 10] + "\"";
+    const char* dash = kDashes[(f / 2 + f) % 4];  // neighbours in the list differ in colour and pattern
+    if (*dash) st += std::string(" stroke-dasharray=\"") + dash + "\"";
+    return st;
+  };
+  const double width = 960, panel_h = 200, left = 60, right = 20, gap = 70;
+  const double legend_rows = std::ceil(static_cast<double>(filters.size()) / 4.0);
+  const double top = 20 + 18.0 * legend_rows;  // the legend: four filters a row
+  const double height = top + static_cast<double>(trials.size()) * (panel_h + gap) + 10;
+  const double plot_w = width - left - right;
   std::ostringstream svg;
   svg << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << width << "\" height=\"" << height
       << "\" font-family=\"sans-serif\" font-size=\"12\">\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
-  // Legend.
   for (std::size_t f = 0; f < filters.size(); ++f) {
-    const double y = 16 + 16.0 * static_cast<double>(f);
-    svg << "<line x1=\"" << left << "\" y1=\"" << y << "\" x2=\"" << left + 20 << "\" y2=\"" << y << "\" stroke=\""
-        << kColours[f % 10] << "\" stroke-width=\"2\"/><text x=\"" << left + 25 << "\" y=\"" << y + 4 << "\">"
-        << xml_text(filters[f]) << "</text>\n";
+    const double x = left + plot_w / 4.0 * static_cast<double>(f % 4);
+    const double y = 16 + 18.0 * std::floor(static_cast<double>(f) / 4.0);
+    svg << "<line x1=\"" << x << "\" y1=\"" << y << "\" x2=\"" << x + 30 << "\" y2=\"" << y << "\" " << style(f)
+        << " stroke-width=\"2\"/><text x=\"" << x + 36 << "\" y=\"" << y + 4 << "\">" << xml_text(filters[f])
+        << "</text>\n";
   }
   for (std::size_t p = 0; p < trials.size(); ++p) {
-    const double y0 = top + static_cast<double>(p) * (panel_h + gap) + 20;
-    double t_max = 1e-9, e_max = 1.0;
+    const double y0 = top + static_cast<double>(p) * (panel_h + gap) + 30;
+    double t_max = 1e-9, e_max = 1.0, unscored = 0.0;
+    std::string series = "total error";
     for (const auto& r : results) {
       if (r.trial != trials[p]) continue;
+      series = r.series_name;
+      unscored = std::max(unscored, r.unscored_until_s);
       for (std::size_t i = 0; i < r.time_s.size(); ++i) {
         t_max = std::max(t_max, static_cast<double>(r.time_s[i]));
         if (std::isfinite(r.total_deg[i])) e_max = std::max(e_max, static_cast<double>(r.total_deg[i]));
       }
     }
-    e_max = std::ceil(e_max);
-    const double plot_w = width - left - right;
-    svg << "<text x=\"" << left << "\" y=\"" << y0 - 6 << "\" font-weight=\"bold\">" << xml_text(trials[p])
-        << ": total error (deg) over time (s)</text>\n";
+    const double y_step = tick_step(e_max, 5.0);
+    e_max = std::ceil(e_max / y_step) * y_step;
+    const double x_step = tick_step(t_max, 10.0);
+    auto x_of = [&](double t) { return left + plot_w * std::min(1.0, t / t_max); };
+    auto y_of = [&](double e) { return y0 + panel_h - panel_h * std::min(1.0, e / e_max); };
+    svg << "<text x=\"" << left << "\" y=\"" << y0 - 8 << "\" font-weight=\"bold\">" << xml_text(trials[p]) << ": "
+        << xml_text(series) << " (deg) over time (s)</text>\n";
+    if (unscored > 0.0) {
+      svg << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << x_of(unscored) - left << "\" height=\""
+          << panel_h << "\" fill=\"#e8e8e8\"/><text x=\"" << left + 4 << "\" y=\"" << y0 + 14
+          << "\" fill=\"#555\">not scored</text>\n";
+    }
+    for (double e = 0.0; e <= e_max + 1e-9 * e_max; e += y_step) {
+      const double y = y_of(e);
+      svg << "<line x1=\"" << left << "\" y1=\"" << y << "\" x2=\"" << left + plot_w << "\" y2=\"" << y
+          << "\" stroke=\"#ddd\"/><line x1=\"" << left - 4 << "\" y1=\"" << y << "\" x2=\"" << left << "\" y2=\"" << y
+          << "\" stroke=\"#444\"/><text x=\"" << left - 7 << "\" y=\"" << y + 4 << "\" text-anchor=\"end\">"
+          << tick_label(e, y_step) << "</text>\n";
+    }
+    for (double t = 0.0; t <= t_max + 1e-9 * t_max; t += x_step) {
+      const double x = x_of(t);
+      svg << "<line x1=\"" << x << "\" y1=\"" << y0 << "\" x2=\"" << x << "\" y2=\"" << y0 + panel_h
+          << "\" stroke=\"#ddd\"/><line x1=\"" << x << "\" y1=\"" << y0 + panel_h << "\" x2=\"" << x << "\" y2=\""
+          << y0 + panel_h + 4 << "\" stroke=\"#444\"/><text x=\"" << x << "\" y=\"" << y0 + panel_h + 17
+          << "\" text-anchor=\"middle\">" << tick_label(t, x_step) << "</text>\n";
+    }
     svg << "<rect x=\"" << left << "\" y=\"" << y0 << "\" width=\"" << plot_w << "\" height=\"" << panel_h
         << "\" fill=\"none\" stroke=\"#444\"/>\n";
-    svg << "<text x=\"" << left - 5 << "\" y=\"" << y0 + 10 << "\" text-anchor=\"end\">" << e_max << "</text>"
-        << "<text x=\"" << left - 5 << "\" y=\"" << y0 + panel_h << "\" text-anchor=\"end\">0</text>"
-        << "<text x=\"" << left + plot_w << "\" y=\"" << y0 + panel_h + 14 << "\" text-anchor=\"end\">"
-        << std::lround(t_max) << "</text>\n";
+    svg << "<text x=\"" << left + plot_w / 2 << "\" y=\"" << y0 + panel_h + 32
+        << "\" text-anchor=\"middle\">time (s)</text>"
+        << "<text transform=\"translate(" << left - 42 << "," << y0 + panel_h / 2
+        << ") rotate(-90)\" text-anchor=\"middle\">deg</text>\n";
     for (const auto& r : results) {
       if (r.trial != trials[p]) continue;
       const auto f = static_cast<std::size_t>(std::find(filters.begin(), filters.end(), r.filter) - filters.begin());
-      svg << "<polyline fill=\"none\" stroke-width=\"1\" stroke=\"" << kColours[f % 10] << "\" points=\"";
+      svg << "<polyline fill=\"none\" stroke-width=\"1.2\" " << style(f) << " points=\"";
       for (std::size_t i = 0; i < r.time_s.size(); ++i) {
         if (!std::isfinite(r.total_deg[i])) continue;
-        const double x = left + plot_w * r.time_s[i] / t_max;
-        const double y = y0 + panel_h - panel_h * std::min(1.0, r.total_deg[i] / e_max);
+        const double x = x_of(r.time_s[i]);
+        const double y = y_of(r.total_deg[i]);
         svg << std::lround(x * 10) / 10.0 << "," << std::lround(y * 10) / 10.0 << " ";
       }
       svg << "\"/>\n";

@@ -131,7 +131,16 @@ SensorSimulator::SensorSimulator(const SensorErrors& errors, double rate_hz, std
   if (!(errors.drop_probability >= 0.0 && errors.drop_probability <= 1.0)) {
     throw std::invalid_argument("drop_probability must be in [0, 1]");
   }
+  if (errors.mag_delay_samples < 0 || errors.mag_delay_samples > 1000) {
+    throw std::invalid_argument("mag_delay_samples must be in [0, 1000]");
+  }
+  if (!(errors.mag_bandwidth_hz >= 0.0) || !std::isfinite(errors.mag_bandwidth_hz)) {
+    throw std::invalid_argument("mag_bandwidth_hz must be >= 0");
+  }
   const double dt = 1.0 / rate_hz;
+  if (errors.mag_bandwidth_hz > 0.0)
+    mag_lowpass_alpha_ = 1.0 - std::exp(-2.0 * std::numbers::pi * errors.mag_bandwidth_hz * dt);
+  mag_delay_line_.assign(static_cast<std::size_t>(errors.mag_delay_samples), Vec3::Zero());
   auto init = [&](const ChannelErrors& e, ChannelState& s) {
     s.reading_from_physical = e.physical_from_reading().inverse();
     s.white_sd = e.white_density * std::sqrt(rate_hz);
@@ -172,7 +181,26 @@ fusion::ImuSample SensorSimulator::measure(const Vec3& gyr, const Vec3& specific
   s.timestamp_ns = timestamp_ns;
   s.gyr = apply(errors_.gyr, gyr_, gyr, t);
   s.acc = apply(errors_.acc, acc_, specific_force, t);
-  s.mag = apply(errors_.mag, mag_, mag, t);
+  // The magnetometer's own dynamics act on the physical field: its low-pass (exact first-order step, started at
+  // the first field), then its delay behind the gyro (the first samples repeat the first field).
+  Vec3 field = mag;
+  if (mag_lowpass_alpha_ < 1.0) {
+    mag_lowpassed_ =
+        mag_lowpass_started_ ? Vec3(mag_lowpassed_ + mag_lowpass_alpha_ * (field - mag_lowpassed_)) : field;
+    mag_lowpass_started_ = true;
+    field = mag_lowpassed_;
+  }
+  if (!mag_delay_line_.empty()) {
+    if (!mag_delay_filled_) {
+      std::fill(mag_delay_line_.begin(), mag_delay_line_.end(), field);
+      mag_delay_filled_ = true;
+    }
+    const Vec3 delayed = mag_delay_line_[mag_delay_next_];
+    mag_delay_line_[mag_delay_next_] = field;
+    mag_delay_next_ = (mag_delay_next_ + 1) % mag_delay_line_.size();
+    field = delayed;
+  }
+  s.mag = apply(errors_.mag, mag_, field, t);
   s.has_mag = has_mag;
   return s;
 }

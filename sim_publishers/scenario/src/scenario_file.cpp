@@ -98,12 +98,22 @@ class Parser : public config::YamlReader<ScenarioError> {
 
   SensorErrors sensors(const YAML::Node& n) const {
     if (n.IsScalar()) return preset(n);
-    check_keys(n, {"preset", "gyr", "acc", "mag", "mag_rate_hz", "jitter_s", "drop_probability"}, "sensors");
+    check_keys(n,
+               {"preset", "gyr", "acc", "mag", "mag_rate_hz", "mag_delay_samples", "mag_bandwidth_hz", "jitter_s",
+                "drop_probability"},
+               "sensors");
     SensorErrors e = n["preset"] ? preset(n["preset"]) : SensorErrors::ideal();
     if (n["gyr"]) e.gyr = channel(n["gyr"], e.gyr, "gyr", false);
     if (n["acc"]) e.acc = channel(n["acc"], e.acc, "acc", false);
     if (n["mag"]) e.mag = channel(n["mag"], e.mag, "mag", true);
     if (n["mag_rate_hz"]) e.mag_rate_hz = non_negative(n["mag_rate_hz"], "mag_rate_hz");
+    if (n["mag_delay_samples"]) {
+      const double d = non_negative(n["mag_delay_samples"], "mag_delay_samples");
+      if (d != std::floor(d) || d > 1000)
+        fail(n["mag_delay_samples"], "mag_delay_samples must be a whole number <= 1000");
+      e.mag_delay_samples = static_cast<int>(d);
+    }
+    if (n["mag_bandwidth_hz"]) e.mag_bandwidth_hz = non_negative(n["mag_bandwidth_hz"], "mag_bandwidth_hz");
     if (n["jitter_s"]) e.jitter_s = non_negative(n["jitter_s"], "jitter_s");
     if (n["drop_probability"]) {
       e.drop_probability = non_negative(n["drop_probability"], "drop_probability");

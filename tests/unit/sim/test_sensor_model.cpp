@@ -1,6 +1,7 @@
 // Sensor error models and presets; determinism of the whole scenario runner.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -129,6 +130,32 @@ TEST(SimSensorModel, SlowMagnetometerDropsAndJitterAppearAtTheirRates) {
   EXPECT_GE(drops, 5);
   EXPECT_LE(drops, 40);
   EXPECT_NEAR(std::sqrt(sum_sq_jitter / (n - 1)), 1e-3, 0.1e-3);
+}
+
+// A magnetometer that lags the gyro by d samples reads the field of d samples earlier (the first ones repeat the first
+// field); its own first-order low-pass answers a field step with 1 - exp(-2 pi f_c t), exactly at the sample times.
+TEST(SimSensorModel, MagnetometerDelayAndBandwidth) {
+  SensorErrors delayed;
+  delayed.mag_delay_samples = 2;
+  SensorSimulator d(delayed, 100.0, 1);
+  for (int k = 0; k < 10; ++k) {
+    const fusion::ImuSample s = d.measure(Vec3::Zero(), Vec3::Zero(), Vec3(k, 0, 0), k * 0.01, k, true);
+    EXPECT_EQ(s.mag.x(), std::max(0, k - 2)) << k;
+  }
+  SensorErrors lowpassed;
+  lowpassed.mag_bandwidth_hz = 5.0;
+  SensorSimulator l(lowpassed, 100.0, 1);
+  l.measure(Vec3::Zero(), Vec3::Zero(), Vec3::Zero(), 0.0, 0, true);  // starts at the first field, 0
+  for (int k = 1; k <= 50; ++k) {
+    const fusion::ImuSample s = l.measure(Vec3::Zero(), Vec3::Zero(), Vec3(1, 0, 0), k * 0.01, k, true);
+    EXPECT_NEAR(s.mag.x(), 1.0 - std::exp(-2.0 * std::numbers::pi * 5.0 * 0.01 * k), 1e-12) << k;
+  }
+  SensorErrors bad;
+  bad.mag_delay_samples = -1;
+  EXPECT_THROW(SensorSimulator(bad, 100.0, 1), std::invalid_argument);
+  bad.mag_delay_samples = 0;
+  bad.mag_bandwidth_hz = -1.0;
+  EXPECT_THROW(SensorSimulator(bad, 100.0, 1), std::invalid_argument);
 }
 
 TEST(SimSensorModel, SameSeedIsBitIdenticalAnotherSeedDiffers) {

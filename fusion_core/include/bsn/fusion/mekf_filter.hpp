@@ -13,7 +13,9 @@
 // Nez work in NED with a JPL-style error; here everything is in the project's convention (ENU, Hamilton,
 // sensor-to-earth q) and the error state is the sensor-frame rotation vector: q_true = q_est * exp(dtheta).
 // With that choice the error dynamics, Phi, Q_d and H are the paper's, and r3 is the earth vertical expressed in
-// the sensor frame.
+// the sensor frame. Magnetometer rejection (MagneticRAdaption) as in the EKF: lag-tolerant dip test, the reading used
+// again at four times its variance after 60 s of rejection, and while it is rejected the accelerometer update keeps
+// its tilt part only (no turn about the vertical, no bias change along it).
 #pragma once
 
 #include <Eigen/Core>
@@ -170,8 +172,8 @@ class MekfFilter final : public OrientationFilter {
   void set_reference(const Vec3& mag_earth);
   int classify(const ImuSample& s) const;
   void adapt(const ImuSample& s);
-  void update_accelerometer(const Vec3& acc, const MekfNoise& n);
-  void update_magnetometer(const ImuSample& s, const MekfNoise& n);
+  void update_accelerometer(const Vec3& acc, const MekfNoise& n, bool keep_heading);
+  void update_magnetometer(const ImuSample& s, const MekfNoise& n, double dt);
 
   Params params_;
   bool adaptive_;

@@ -13,6 +13,7 @@
 #include <string_view>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/mag_disturbance_detector.hpp"
 #include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion {
@@ -33,6 +34,15 @@ class MagneticRAdaption {
     /// magnetometer is trusted again, s. Default 0.2 s: on the BROAD trials a longer wait (1 s) kept the
     /// magnetometer out for most of the fast trials and cost the Kalman filters several degrees of heading.
     double min_clean_s = 0.2;
+    /// The magnetometer's delay beyond one sample, s: both dip thresholds widen by |w_h| (dt + latency_s) while
+    /// the sensor turns (lag_dip_tolerance; reason and default as mag_latency_s of MagDisturbanceDetector::Params).
+    /// Default 0.0064 s.
+    double latency_s = 0.0064;
+    /// After this much rejection (RejectionBudget) the magnetometer is used again with its variance multiplied by
+    /// 1 / reduced_gain^2, so the heading error stays bounded, s. Default 60 s (VQF).
+    double accept_after_s = 60.0;
+    /// Default 0.5 (VQF's rejection factor 2): the variance of such a reading is 4 times the nominal one.
+    double reduced_gain = 0.5;
   };
 
   /// Throws std::invalid_argument unless 0 < exit <= enter for both quantities and min_clean_s >= 0.
@@ -57,8 +67,11 @@ class MagneticRAdaption {
     static Reference of(const Vec3& m, const Vec3& up);
   };
   /// Judges reading m against `ref`, with `up` the estimated unit vertical in m's frame (Fan eq. 17): the
-  /// magnitude ratio |m| / ref.norm and the dip deviation, compared by its cosine.
-  double update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref);
+  /// magnitude ratio |m| / ref.norm and the dip deviation, compared by its cosine. rate_rad_s = |w| widens the dip
+  /// thresholds by lag_dip_tolerance(). After accept_after_s of rejection it returns 1 / reduced_gain^2 instead of
+  /// infinity.
+  double update(std::uint64_t t_ns, const Vec3& m, const Vec3& up, const Reference& ref, double rate_rad_s = 0.0,
+                double dt_s = 0.0);
 
   /// True while the field is judged disturbed (including the clean waiting period).
   bool disturbed() const { return disturbed_; }
@@ -67,6 +80,8 @@ class MagneticRAdaption {
   void reset() {
     disturbed_ = false;
     clean_since_valid_ = false;
+    budget_.reset();
+    last_ns_ = 0;
   }
 
   const Params& params() const { return params_; }
@@ -83,6 +98,8 @@ class MagneticRAdaption {
   bool disturbed_ = false;
   bool clean_since_valid_ = false;  ///< a clean period has started while disturbed_
   std::uint64_t clean_since_ns_ = 0;
+  RejectionBudget budget_;
+  std::uint64_t last_ns_ = 0;  ///< time of the last reading judged by update(m, up, ref)
 };
 
 /// The R-adaption parameters of a Kalman filter under their filter parameter names (the Params of EKF, MEKF and
@@ -98,9 +115,15 @@ struct RAdaptionFilterParams {
   double mag_dip_enter_rad = 0.1745;
   double mag_dip_exit_rad = 0.0873;
   double mag_min_clean_s = 0.2;
+  /// The lag tolerance and the long-rejection rule of MagneticRAdaption::Params (latency_s, accept_after_s,
+  /// reduced_gain): 0.0064 s, 60 s, 0.5.
+  double mag_latency_s = 0.0064;
+  double mag_accept_after_s = 60.0;
+  double mag_reduced_gain = 0.5;
 
   MagneticRAdaption::Params thresholds() const {
-    return {mag_magnitude_enter, mag_magnitude_exit, mag_dip_enter_rad, mag_dip_exit_rad, mag_min_clean_s};
+    return {mag_magnitude_enter, mag_magnitude_exit, mag_dip_enter_rad,  mag_dip_exit_rad,
+            mag_min_clean_s,     mag_latency_s,      mag_accept_after_s, mag_reduced_gain};
   }
   /// Throws std::invalid_argument, naming `owner`, unless mag_rejection is 0 or 1 (MagneticRAdaption checks the
   /// thresholds).
@@ -113,13 +136,16 @@ struct RAdaptionFilterParams {
 
 /// The R-adaption parameters' entries of a filter's parameter table (P derives from RAdaptionFilterParams).
 template <class P>
-constexpr std::array<ParamField<P>, 6> r_adaption_param_fields() {
+constexpr std::array<ParamField<P>, 9> r_adaption_param_fields() {
   return {{{"mag_rejection", &P::mag_rejection},
            {"mag_magnitude_enter", &P::mag_magnitude_enter},
            {"mag_magnitude_exit", &P::mag_magnitude_exit},
            {"mag_dip_enter_rad", &P::mag_dip_enter_rad},
            {"mag_dip_exit_rad", &P::mag_dip_exit_rad},
-           {"mag_min_clean_s", &P::mag_min_clean_s}}};
+           {"mag_min_clean_s", &P::mag_min_clean_s},
+           {"mag_latency_s", &P::mag_latency_s},
+           {"mag_accept_after_s", &P::mag_accept_after_s},
+           {"mag_reduced_gain", &P::mag_reduced_gain}}};
 }
 
 }  // namespace bsn::fusion

@@ -66,11 +66,10 @@ class SeelRuppinFilter final : public OrientationFilter {
     /// with the estimated vertical, s; the magnetometer is used unchecked meanwhile. One reading would carry its
     /// noise, and a start in motion its wrong vertical, into every later decision. Default 3 s.
     double mag_reference_s = 3.0;
-    /// A disturbance whose field stays the same (magnitude and dip within the leave thresholds) for this long
-    /// is taken as the new reference field, s. Without it, a wrong reference (a start in motion or next to a
-    /// magnet) would shut the magnetometer out for good; a field that keeps changing, like that of a magnet
-    /// moving with or near the sensor, is never adopted. Default 20 s.
-    double mag_max_rejection_s = 20.0;
+    // The detector (MagDisturbanceDetector::Params) tolerates the magnetometer's lag while the sensor turns
+    // (mag_latency_s, fed with the bias-corrected rate), adopts a disturbance that keeps the same field for
+    // mag_max_rejection_s as the new reference, and after mag_accept_after_s of rejection uses the magnetometer
+    // again with tau_mag lengthened by 1 / mag_reduced_gain, so the heading never drifts without bound.
   };
 
   /// Quantities derived once from Params.
@@ -81,7 +80,6 @@ class SeelRuppinFilter final : public OrientationFilter {
     double bias_factor_acc = 0.0;   ///< zeta^2 / (160 tau_acc), 1/s
     double bias_factor_mag = 0.0;   ///< zeta^2 / (160 tau_mag), 1/s
     std::uint64_t mag_reference_ns = 0;
-    std::uint64_t mag_max_rejection_ns = 0;
     bool acc_clip_test = false;      ///< max_acc_error_rad < pi: clipping can be decided without atan2
     double sin_max_acc_error = 0.0;  ///< sin(max_acc_error_rad)
     double cos_max_acc_error = 0.0;  ///< cos(max_acc_error_rad)
@@ -92,11 +90,11 @@ class SeelRuppinFilter final : public OrientationFilter {
   };
 
   struct State {
-    Quat q = Quat::Identity();      ///< sensor-to-earth
-    Vec3 gyro_bias = Vec3::Zero();  ///< sensor frame, rad/s; the paper's b is -gyro_bias (eq. 14 adds b)
-    Quat q_gyr = Quat::Identity();  ///< sensor-to-inertial: strapdown integration only (acc low-pass frame)
-    Vec3 acc_lp_s1 = Vec3::Zero();  ///< acc low-pass delay states, inertial frame, m/s^2
-    Vec3 acc_lp_s2 = Vec3::Zero();
+    Quat q = Quat::Identity();        ///< sensor-to-earth
+    Vec3 gyro_bias = Vec3::Zero();    ///< sensor frame, rad/s; the paper's b is -gyro_bias (eq. 14 adds b)
+    Quat q_gyr = Quat::Identity();    ///< sensor-to-inertial: strapdown integration only (acc low-pass frame)
+    Vec3 acc_lp_y = Vec3::Zero();     ///< acc low-pass output, inertial frame, m/s^2
+    Vec3 acc_lp_rate = Vec3::Zero();  ///< its time derivative, m/s^3 (the second state of the low-pass)
     double acc_lp_warmup_s = 0.0;     ///< time the low-pass has run; below tau it outputs the running mean
     double acc_lp_count = 0.0;        ///< samples in the running mean
     Vec3 acc_lp_mean = Vec3::Zero();  ///< running mean of the start-up, inertial frame, m/s^2
@@ -107,9 +105,6 @@ class SeelRuppinFilter final : public OrientationFilter {
     double mag_norm_sum = 0.0;  ///< uT, over the readings of the learning period
     double mag_dip_sum = 0.0;   ///< rad
     double mag_learning_count = 0.0;
-    double mag_candidate_norm = 0.0;           ///< uT: the field of the current disturbance, a candidate reference
-    double mag_candidate_dip = 0.0;            ///< rad
-    std::uint64_t mag_candidate_since_ns = 0;  ///< since when the disturbance has stayed at the candidate; 0 = none
     FilterFlags flags;
   };
 
@@ -133,11 +128,11 @@ class SeelRuppinFilter final : public OrientationFilter {
   UpdateResult step(const ImuSample& s, double dt) override;
   void clear() override;
   void correct_acc(const Vec3& acc, double dt);
-  void correct_mag(const ImuSample& s);
+  void correct_mag(const ImuSample& s, double rate_rad_s);
   /// Starts learning the detector's reference field at t_ns.
   void start_mag_reference(std::uint64_t t_ns);
   /// The disturbance decision for one reading (false while the reference is being learned).
-  bool mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up);
+  bool mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s);
 
   /// k_i = dt / (1.4 tau_i + dt) for the last dt seen (dt is nearly always the same from sample to sample).
   struct GainCache {
@@ -148,10 +143,10 @@ class SeelRuppinFilter final : public OrientationFilter {
 
   Params params_;
   Coefficients coeff_;
-  /// Butterworth coefficients for the last dt seen.
+  /// The Butterworth's transition matrix over the last dt seen (its state is dt-independent, see update()).
   struct LowPassCache {
     double cached_dt = -1.0;
-    double b0 = 0.0, b1 = 0.0, b2 = 0.0, a1 = 0.0, a2 = 0.0;
+    double p00 = 0.0, p01 = 0.0, p10 = 0.0, p11 = 0.0;
     void update(double dt, double fc_hz);
   };
   Vec3 lowpass_acc(const Vec3& acc, double dt);

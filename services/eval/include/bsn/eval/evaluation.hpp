@@ -12,14 +12,16 @@
 namespace bsn::eval {
 
 struct TrialResult {
-  std::string trial;             ///< file stem, e.g. "02_undisturbed_slow_rotation_B"
-  std::string filter;            ///< filter spec as given, e.g. "complementary" or "seel_ruppin:tau_acc_s=3"
-  fusion::ErrorAngles rmse;      ///< radians
-  std::size_t scored = 0;        ///< samples that counted (movement and a finite reference)
-  std::size_t rejected = 0;      ///< samples the filter rejected
-  std::size_t non_finite = 0;    ///< estimates that were not finite (must stay 0)
-  std::vector<float> time_s;     ///< (downsampled) time of the error series, s
-  std::vector<float> total_deg;  ///< (downsampled) total error over time, deg (NaN where not scored)
+  std::string trial;                        ///< file stem, e.g. "02_undisturbed_slow_rotation_B"
+  std::string filter;                       ///< filter spec as given, e.g. "complementary" or "seel_ruppin:tau_acc_s=3"
+  fusion::ErrorAngles rmse;                 ///< radians
+  std::size_t scored = 0;                   ///< samples that counted (movement and a finite reference)
+  std::size_t rejected = 0;                 ///< samples the filter rejected
+  std::size_t non_finite = 0;               ///< estimates that were not finite (must stay 0)
+  std::vector<float> time_s;                ///< (downsampled) time of the error series, s
+  std::vector<float> total_deg;             ///< (downsampled) total error over time, deg (NaN where not scored)
+  std::string series_name = "total error";  ///< what total_deg holds (the standard tests plot their judged angle)
+  double unscored_until_s = 0.0;            ///< time of the first scored sample (the plot shades what is before)
 };
 
 /// Runs one fresh filter from the first sample over the whole recording; scores the movement samples with a
@@ -46,7 +48,9 @@ std::string to_json(const std::vector<TrialResult>& results);
 /// A human table, one row per trial and filter, then the means.
 std::string to_table(const std::vector<TrialResult>& results);
 
-/// An SVG image: one panel per trial, total error over time, one line per filter.
+/// An SVG image: one panel per trial, the error series over time, one line per filter (ten colours, and dash
+/// patterns that tell the filters apart in grey print too), axes with ticks and a grid, the unscored start
+/// shaded and labelled.
 std::string to_svg(const std::vector<TrialResult>& results);
 
 }  // namespace bsn::eval

@@ -51,7 +51,14 @@ struct ChannelErrors {
 
 struct SensorErrors {
   ChannelErrors gyr, acc, mag;
-  double mag_rate_hz = 0.0;       ///< magnetometer sample rate, Hz (0 = every IMU sample)
+  double mag_rate_hz = 0.0;  ///< magnetometer sample rate, Hz (0 = every IMU sample)
+  /// The magnetometer reads the field of this many IMU samples earlier: a part whose magnetometer is read out
+  /// before the gyro is sampled, or a separate chip on a slower bus, lags the gyro (0 = in step).
+  int mag_delay_samples = 0;
+  /// Corner of the magnetometer's own first-order low-pass (its internal averaging), Hz; 0 = none. It acts on
+  /// the physical field at the IMU rate, before the other errors, so a fast rotation shows in the reading late
+  /// and slightly shrunk (ratio 1 / sqrt(1 + (f_rot / f_c)^2)).
+  double mag_bandwidth_hz = 0.0;
   double jitter_s = 0.0;          ///< SD of the sampling instant around its nominal time, s
   double drop_probability = 0.0;  ///< chance that a sample is lost, 0..1
 
@@ -88,6 +95,12 @@ class SensorSimulator {
 
   SensorErrors errors_;
   ChannelState gyr_, acc_, mag_;
+  double mag_lowpass_alpha_ = 1.0;  ///< 1 - exp(-2 pi f_c dt): the first-order step at the IMU rate (1 = none)
+  Vec3 mag_lowpassed_ = Vec3::Zero();
+  bool mag_lowpass_started_ = false;
+  std::vector<Vec3> mag_delay_line_;  ///< the last mag_delay_samples fields, oldest at mag_delay_next_
+  std::size_t mag_delay_next_ = 0;
+  bool mag_delay_filled_ = false;
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};
 };
