@@ -10,6 +10,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev         # tests and benchmarks
   cyclonedds-dev cyclonedds-tools                    # another vendor's DDS, for the interoperability test
   clang-format procps                                # formatting check in CI; ps for diagnostics
+  clang libclang-rt-14-dev                           # the fuzz targets (libFuzzer, sanitizers) in CI
 )
 
 missing=()

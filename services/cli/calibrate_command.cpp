@@ -292,15 +292,19 @@ Command calibrate_command() {
             cmd->add_option("--input", opt->input, "recording (CSV, BROAD HDF5) of still poses turned by hand");
             cmd->add_option("--allan", opt->allan, "static recording: print Allan noise figures instead");
             cmd->add_option("--field-magnitude", opt->field_magnitude, "|calibrated magnetometer|, M")
-                ->capture_default_str();
+                ->capture_default_str()
+                ->check(positive_number(1e6));
             cmd->add_flag("--json", opt->json, "print the magnetometer calibration as one JSON object");
             cmd->add_option("--output", opt->output, "calibration file to write (default: INPUT.calib.yaml)");
             cmd->add_option("--node", opt->node, "node id to record in the calibration file");
             cmd->add_flag("--accelerometer", opt->accelerometer, "also calibrate the accelerometer (|g|)");
             cmd->add_flag("--gyro-bias", opt->gyro_bias, "also write the gyro bias measured at rest");
             cmd->add_option("--rest-threshold", opt->rest_rate_rad_s, "rest when |gyro - bias| < this, rad/s")
-                ->capture_default_str();
-            cmd->add_option("--min-pose", opt->min_pose_s, "shortest rest counted as a pose, s")->capture_default_str();
+                ->capture_default_str()
+                ->check(positive_number(100.0));
+            cmd->add_option("--min-pose", opt->min_pose_s, "shortest rest counted as a pose, s")
+                ->capture_default_str()
+                ->check(positive_number(3600.0));
             cmd->add_option("--plot", opt->plot, "with --allan: write the Allan curves as SVG");
             return [opt] { return run_calibrate(*opt); };
           }};

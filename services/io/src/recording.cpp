@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -62,6 +63,8 @@ std::vector<std::string> split(const std::string& line) {
 }  // namespace
 
 Recording read_csv(const std::string& path) {
+  if (std::error_code ec; std::filesystem::is_directory(path, ec))
+    throw IoError(path + ": is a directory, not a CSV file");
   std::ifstream in(path);
   if (!in) throw IoError(path + ": cannot open");
   std::string line;
