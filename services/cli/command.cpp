@@ -43,6 +43,12 @@ void print_usage_error(CLI::App& app, const CLI::ParseError& error, std::span<co
     if (!near.empty()) message += "; did you mean '" + near + "'?";
     if (!near.empty() || !is_option) break;
   }
+  if (chosen.empty() && message == error.what()) {
+    // No command at all, or only options: say which commands there are.
+    std::string names;
+    for (const Command& c : commands) names += (names.empty() ? "" : ", ") + c.name;
+    message += " (one of: " + names + ")";
+  }
   std::fprintf(stderr, "bsn: %s\nRun with --help for more information.\n", message.c_str());
 }
 

@@ -47,6 +47,14 @@ TEST_F(CliUsage, NoGuessForAWordFarFromEveryName) {
 
   EXPECT_EQ(run("none", {}), 2);
   EXPECT_NE(output("none").find("A subcommand is required"), std::string::npos) << output("none");
+  // Issue 16, item 6: the message says which commands there are, also after an unknown option alone.
+  EXPECT_NE(output("none").find("(one of: sim, fusion"), std::string::npos) << output("none");
+  EXPECT_EQ(run("option_only", {"-x"}), 2);
+  EXPECT_NE(output("option_only").find("(one of: sim, fusion"), std::string::npos) << output("option_only");
+  // A value after an unknown option is no command name: the command word after it is the one named.
+  EXPECT_EQ(run("value", {"--domain", "5", "fuson"}), 2);
+  EXPECT_NE(output("value").find("unknown command 'fuson'; did you mean 'fusion'?"), std::string::npos)
+      << output("value");
 }
 
 TEST_F(CliUsage, AbsurdNumbersAreRefusedAtParseTimeNamingTheOption) {
