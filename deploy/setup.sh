@@ -11,6 +11,7 @@ packages=(
   cyclonedds-dev cyclonedds-tools                    # another vendor's DDS, for the interoperability test
   clang-format procps                                # formatting check in CI; ps for diagnostics
   openssl systemd iproute2                           # PKI for DDS-Security, unit-file checks, network namespaces
+  clang libclang-rt-14-dev                           # the fuzz targets (libFuzzer, sanitizers) in CI
 )
 
 missing=()

@@ -164,15 +164,19 @@ services::Command sim_command() {
             auto opt = std::make_shared<SimNodeOptions>();
             cmd->add_option("--node", opt->node, "node id on bsn/raw (required unless --scenario with --out)");
             cmd->add_option("--segment", opt->segment, "segment name on bsn/truth/orientation (default: node id)");
-            cmd->add_option("--rate", opt->rate_hz, "sample rate in Hz")->capture_default_str();
+            cmd->add_option("--rate", opt->rate_hz, "sample rate in Hz")
+                ->capture_default_str()
+                ->check(services::positive_number(10000.0));
             cmd->add_option("--seed", opt->seed, "motion and noise seed (default: from the node id)");
-            cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)");
+            cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)")
+                ->check(services::non_negative_number(1e9));
             cmd->add_flag("--ideal", opt->ideal, "no sensor noise (with --scenario: every sensor error off)");
             cmd->add_option("--scenario", opt->scenario,
                             "scenario YAML file: publish its segment --segment (default: node id)")
                 ->check(CLI::ExistingFile);
             cmd->add_option("--speed", opt->speed, "with --scenario: publish N times faster than real time")
-                ->capture_default_str();
+                ->capture_default_str()
+                ->check(services::positive_number(1e6));
             cmd->add_option("--out", opt->out_dir, "with --scenario: write DIR/<segment>.hdf5 (BROAD layout) and exit");
             services::add_domain_option(cmd, opt->domain);
             return [opt, cmd] {

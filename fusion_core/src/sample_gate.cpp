@@ -1,5 +1,6 @@
 #include "bsn/fusion/sample_gate.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -38,7 +39,8 @@ std::string_view rejection_reason_name(std::size_t index) {
 
 SampleGate::SampleGate(const Params& params) : params_(params) {
   if (!(params.max_forward_jump_s > 0.0) || !(params.max_rebase_step_s > 0.0) || params.rebase_after < 1 ||
-      !(params.max_abs_acc_m_s2 > 0.0) || !(params.max_abs_gyr_rad_s > 0.0) || !(params.max_abs_mag_ut > 0.0)) {
+      !(params.max_abs_acc_m_s2 > 0.0) || !(params.max_abs_gyr_rad_s > 0.0) || !(params.max_abs_mag_ut > 0.0) ||
+      params.max_sequence_gap < 1) {
     throw std::invalid_argument("sample gate: every limit must be > 0 and rebase_after >= 1");
   }
   max_jump_ns_ = seconds_to_ns(params.max_forward_jump_s);
@@ -47,11 +49,6 @@ SampleGate::SampleGate(const Params& params) : params_(params) {
 
 SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
   ++counters_.received;
-  // Lost samples are the sequence numbers never seen, rejected or not; a lower number (reordering, a node
-  // restarting its count) is not a loss.
-  if (seen_any_ && seq > max_seq_seen_ + 1) counters_.missing += seq - max_seq_seen_ - 1;
-  if (!seen_any_ || seq > max_seq_seen_) max_seq_seen_ = seq;
-  seen_any_ = true;
   SampleVerdict verdict = SampleVerdict::kAccepted;
   if (!s.values_finite()) {
     verdict = SampleVerdict::kNonFinite;
@@ -70,8 +67,26 @@ SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
   } else {
     return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
   }
+  return reject(verdict, seq);
+}
+
+SampleVerdict SampleGate::reject(SampleVerdict verdict, std::uint64_t seq) {
   ++counters_.rejected[static_cast<std::size_t>(rejection_index(verdict))];
+  // A rejected sample arrived, so its number is not lost, but it leaves the base alone: it only offsets the
+  // next gap, if its number lies in the plausible window ahead.
+  if (have_last_ && seq - next_seq_ < params_.max_sequence_gap) ++rejected_in_window_;
   return verdict;
+}
+
+void SampleGate::count_missing(std::uint64_t seq, bool restart) {
+  // Lost samples are the numbers skipped since the last accepted sample (modulo 2^64) that no rejected sample
+  // carried. A number behind the base (reordering, a node restarting its count) or implausibly far ahead restarts
+  // the count: no loss.
+  const std::uint64_t step = seq - next_seq_;
+  if (have_last_ && !restart && step < params_.max_sequence_gap)
+    counters_.missing += step - std::min(step, rejected_in_window_);
+  next_seq_ = seq + 1;
+  rejected_in_window_ = 0;
 }
 
 SampleVerdict SampleGate::reject_time(SampleVerdict reason, std::uint64_t seq, std::uint64_t t_ns) {
@@ -84,15 +99,14 @@ SampleVerdict SampleGate::reject_time(SampleVerdict reason, std::uint64_t seq, s
   candidate_ns_ = t_ns;
   if (candidate_count_ >= params_.rebase_after) {
     ++counters_.clock_resets;
-    max_seq_seen_ = seq;  // a rebooted node restarts its sequence too
-    return accept(SampleVerdict::kAcceptedClockReset, seq, t_ns);
+    return accept(SampleVerdict::kAcceptedClockReset, seq, t_ns);  // a rebooted node restarts its sequence too
   }
-  ++counters_.rejected[static_cast<std::size_t>(rejection_index(reason))];
-  return reason;
+  return reject(reason, seq);
 }
 
 SampleVerdict SampleGate::accept(SampleVerdict verdict, std::uint64_t seq, std::uint64_t t_ns) {
   ++counters_.accepted;
+  count_missing(seq, verdict == SampleVerdict::kAcceptedClockReset);
   have_last_ = true;
   last_seq_ = seq;
   last_ns_ = t_ns;

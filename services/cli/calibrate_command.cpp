@@ -307,7 +307,8 @@ Command calibrate_command() {
             cmd->add_option("--allan", opt->allan, "static recording: print Allan noise figures instead");
             auto* field = cmd->add_option("--field-magnitude", opt->field_magnitude,
                                           "|calibrated magnetometer|, M (with --live: uT, default 50)")
-                              ->capture_default_str();
+                              ->capture_default_str()
+                              ->check(positive_number(1e6));
             cmd->add_flag("--json", opt->json, "print the magnetometer calibration as one JSON object");
             cmd->add_option("--output", opt->output, "calibration file to write (default: INPUT.calib.yaml)");
             cmd->add_option("--node", opt->node,
@@ -316,8 +317,11 @@ Command calibrate_command() {
             cmd->add_flag("--accelerometer", opt->accelerometer, "also calibrate the accelerometer (|g|)");
             cmd->add_flag("--gyro-bias", opt->gyro_bias, "also write the gyro bias measured at rest");
             cmd->add_option("--rest-threshold", opt->rest_rate_rad_s, "rest when |gyro - bias| < this, rad/s")
-                ->capture_default_str();
-            cmd->add_option("--min-pose", opt->min_pose_s, "shortest rest counted as a pose, s")->capture_default_str();
+                ->capture_default_str()
+                ->check(positive_number(100.0));
+            cmd->add_option("--min-pose", opt->min_pose_s, "shortest rest counted as a pose, s")
+                ->capture_default_str()
+                ->check(positive_number(3600.0));
             cmd->add_option("--plot", opt->plot, "with --allan: write the Allan curves as SVG");
             LiveCalibrationOptions& live = opt->live_options;
             cmd->add_flag("--live", opt->live, "calibrate live through `bsn calibration` (see --node, --kind)");

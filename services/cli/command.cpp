@@ -1,6 +1,8 @@
 #include "command.hpp"
 
 #include <algorithm>
+#include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 
@@ -27,6 +29,8 @@ void print_usage_error(CLI::App& app, const CLI::ParseError& error, std::span<co
   for (const std::string& arg : app.remaining(true)) {
     const bool is_option = arg.starts_with('-');
     if (!is_option && !chosen.empty()) continue;
+    // A value such as the 5 of "--domain 5" is no command name (they start with a letter).
+    if (!is_option && (arg.empty() || !std::isalpha(static_cast<unsigned char>(arg[0])))) continue;
     std::vector<std::string> candidates;
     if (is_option) {
       candidates = option_names(chosen.empty() ? app : *chosen.front());
@@ -38,6 +42,12 @@ void print_usage_error(CLI::App& app, const CLI::ParseError& error, std::span<co
     if (!is_option) message = "unknown command '" + word + "'";
     if (!near.empty()) message += "; did you mean '" + near + "'?";
     if (!near.empty() || !is_option) break;
+  }
+  if (chosen.empty() && message == error.what()) {
+    // No command at all, or only options: say which commands there are.
+    std::string names;
+    for (const Command& c : commands) names += (names.empty() ? "" : ", ") + c.name;
+    message += " (one of: " + names + ")";
   }
   std::fprintf(stderr, "bsn: %s\nRun with --help for more information.\n", message.c_str());
 }
@@ -70,6 +80,23 @@ int run_cli(int argc, char** argv, std::span<const Command> commands) {
   }
   return 0;
 }
+
+CLI::Validator number_in(double min, double max, bool min_exclusive) {
+  const std::string range = (min_exclusive ? "> " : ">= ") + CLI::detail::to_string(min) +
+                            (std::isinf(max) ? std::string() : " and <= " + CLI::detail::to_string(max));
+  return CLI::Validator(
+      [=](std::string& text) -> std::string {
+        char* end = nullptr;
+        const double v = std::strtod(text.c_str(), &end);
+        const bool number = !text.empty() && end == text.c_str() + text.size();
+        if (number && std::isfinite(v) && (min_exclusive ? v > min : v >= min) && v <= max) return {};
+        return "must be a finite number " + range + " (got " + text + ")";
+      },
+      "NUMBER " + range);
+}
+
+CLI::Validator positive_number(double max) { return number_in(0.0, max, true); }
+CLI::Validator non_negative_number(double max) { return number_in(0.0, max, false); }
 
 void add_domain_option(CLI::App* command, int& domain) {
   domain = dds::default_domain();

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <chrono>
 #include <functional>
+#include <limits>
 #include <optional>
 #include <span>
 #include <string>
@@ -27,6 +28,15 @@ struct Command {
 /// command or option with "did you mean ...?") and returns 2; an exception from the command prints it and
 /// returns 1.
 int run_cli(int argc, char** argv, std::span<const Command> commands);
+
+/// Parse-time check of a numeric option: a finite number in [min, max], or in (min, max] with `min_exclusive`.
+/// A value outside is a usage error (exit 2) whose message names the option, e.g.
+/// "--stale-timeout: must be a finite number > 0 (got -1)". Every numeric option of every command has one.
+CLI::Validator number_in(double min, double max, bool min_exclusive = false);
+/// A finite number > 0 (durations, periods, rates, limits), at most `max`.
+CLI::Validator positive_number(double max = std::numeric_limits<double>::infinity());
+/// A finite number >= 0 (durations where 0 means "no limit", counts), at most `max`.
+CLI::Validator non_negative_number(double max = std::numeric_limits<double>::infinity());
 
 /// Adds --domain (default: $BSN_DOMAIN or 0) to a DDS command.
 void add_domain_option(CLI::App* command, int& domain);

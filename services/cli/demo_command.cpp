@@ -1,7 +1,12 @@
+#include <fcntl.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -60,23 +65,76 @@ std::string render(DemoView& view, const std::vector<std::string>& joint_order, 
       std::snprintf(line, sizeof line, "%-10s (waiting for data)\n", name.c_str());
     } else {
       const auto& j = it->second.latest;
-      const std::string pc = j.parent() + " -> " + j.child();
+      // Names from the network are escaped: a writer on the domain cannot drive this terminal.
+      const std::string pc = logging::printable(j.parent(), 24) + " -> " + logging::printable(j.child(), 24);
       std::snprintf(line, sizeof line, "%-10s %-18s %4s %9.2f %9.2f %9.2f  %7llu  %s\n", name.c_str(), pc.c_str(),
-                    j.axes().c_str(), j.angles()[0] * kDeg, j.angles()[1] * kDeg, j.angles()[2] * kDeg,
-                    static_cast<unsigned long long>(it->second.count), format_flags(j.flags()).c_str());
+                    logging::printable(j.axes(), 8).c_str(), j.angles()[0] * kDeg, j.angles()[1] * kDeg,
+                    j.angles()[2] * kDeg, static_cast<unsigned long long>(it->second.count),
+                    format_flags(j.flags()).c_str());
     }
     out += line;
   }
   if (view.have_status) {
     out += "nodes:";
     for (const auto& n : view.status.nodes()) {
-      std::snprintf(line, sizeof line, " %s %.0fHz%s", n.node_id().c_str(), n.rate_hz(), n.stale() ? "(STALE)" : "");
+      std::snprintf(line, sizeof line, " %s %.0fHz%s", logging::printable(n.node_id(), 64).c_str(), n.rate_hz(),
+                    n.stale() ? "(STALE)" : "");
       out += line;
     }
     out += "\n";
   }
   return out;
 }
+
+/// A forked helper that removes `dir` once this process has gone, however it went (a SIGKILL included), unless
+/// keep() was called. It learns of the end from the pipe between them: the kernel closes this end on any exit.
+class FolderReaper {
+ public:
+  explicit FolderReaper(const std::filesystem::path& dir) {
+    int fds[2];
+    if (pipe(fds) != 0) return;  // no reaper: the normal exit paths still clean up
+    const pid_t middle = fork();
+    if (middle == 0) {
+      // Forked twice, so the reaper is no child of the demo (whose children are its sims and fusion) and init
+      // reaps it.
+      if (fork() != 0) _exit(0);
+      // The reaper: signals meant for the demo's terminal (Ctrl-C) must not stop it, and it holds none of the
+      // demo's files open (a test reading the demo's output waits for every holder of the pipe).
+      std::signal(SIGINT, SIG_IGN);
+      std::signal(SIGTERM, SIG_IGN);
+      const int null_fd = open("/dev/null", O_RDWR);
+      for (int fd = 0; fd < 3; ++fd) dup2(null_fd, fd);
+      for (int fd = 3; fd < 1024; ++fd)
+        if (fd != fds[0]) close(fd);
+      char verdict = 0;
+      while (read(fds[0], &verdict, 1) < 0 && errno == EINTR) {
+      }
+      std::error_code ec;
+      if (verdict != 'k') std::filesystem::remove_all(dir, ec);
+      _exit(0);
+    }
+    close(fds[0]);
+    if (middle > 0) {
+      waitpid(middle, nullptr, 0);
+      write_fd_ = fds[1];
+      fcntl(write_fd_, F_SETFD, FD_CLOEXEC);  // the sims and fusion must not hold it open
+    } else {
+      close(fds[1]);
+    }
+  }
+  ~FolderReaper() {
+    if (write_fd_ >= 0) close(write_fd_);  // the reaper wakes up, removes the folder unless kept, and exits
+  }
+  FolderReaper(const FolderReaper&) = delete;
+  FolderReaper& operator=(const FolderReaper&) = delete;
+  /// The folder stays (it holds the logs of a failure).
+  void keep() {
+    if (write_fd_ >= 0 && write(write_fd_, "k", 1) != 1) logging::log_warn("cannot tell the reaper to keep the logs");
+  }
+
+ private:
+  int write_fd_ = -1;
+};
 
 /// Starts one `bsn sim` per segment and one `bsn fusion`, shows the joint angles live, and stops them all.
 int run_demo(const DemoOptions& opt) {
@@ -89,13 +147,16 @@ int run_demo(const DemoOptions& opt) {
   }
   dds::install_shutdown_handlers();
 
-  // Child logs go to a private folder, removed at the end unless a child failed.
-  char dir_template[] = "/tmp/bsn-demo-XXXXXX";
-  if (mkdtemp(dir_template) == nullptr) {
+  // Child logs go to a private folder ($TMPDIR or /tmp), removed at the end unless a child failed, and removed by a
+  // reaper process if this one dies without a word (SIGKILL).
+  const char* tmp = std::getenv("TMPDIR");
+  std::string dir_template = std::string(tmp && *tmp ? tmp : "/tmp") + "/bsn-demo-XXXXXX";
+  if (mkdtemp(dir_template.data()) == nullptr) {
     std::perror("bsn demo: mkdtemp");
     return 1;
   }
   const std::filesystem::path dir = dir_template;
+  FolderReaper reaper(dir);  // before any DDS thread exists: it forks
   const std::string body_file = (dir / "body.yaml").string();
   std::ofstream(body_file) << config::body_model_to_yaml(body);
 
@@ -187,6 +248,7 @@ int run_demo(const DemoOptions& opt) {
     std::error_code ec;
     std::filesystem::remove_all(dir, ec);
   } else {
+    reaper.keep();
     logging::log_error("logs kept in ", dir.string());
   }
   return exit_code;
@@ -198,9 +260,11 @@ Command demo_command() {
   return {"demo", "Simulated lower body + fusion, live joint angles in the terminal", [](CLI::App* cmd) {
             auto opt = std::make_shared<DemoOptions>();
             cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)")
-                ->check(CLI::NonNegativeNumber);
+                ->check(non_negative_number(1e9));
             cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
-            cmd->add_option("--rate", opt->rate_hz, "sample rate of the simulated nodes, Hz")->capture_default_str();
+            cmd->add_option("--rate", opt->rate_hz, "sample rate of the simulated nodes, Hz")
+                ->capture_default_str()
+                ->check(positive_number(10000.0));  // as bsn sim --rate
             cmd->add_flag("--calibrate", opt->calibrate,
                           "instead: live calibration of a simulated node with a hard-iron offset, heading error "
                           "before and after");

@@ -139,10 +139,10 @@ Command echo_command() {
       "echo", "Print a bsn topic live, one line per sample, in degrees", [](CLI::App* cmd) {
         auto opt = std::make_shared<EchoOptions>();
         cmd->add_option("topic", opt->topic, "one of: " + topic_list())->required();
-        cmd->add_option("--count", opt->count, "exit after N samples")->check(CLI::NonNegativeNumber);
-        cmd->add_option("--rate", opt->rate_hz, "print at most HZ samples per second")->check(CLI::NonNegativeNumber);
+        cmd->add_option("--count", opt->count, "exit after N samples")->check(non_negative_number());
+        cmd->add_option("--rate", opt->rate_hz, "print at most HZ samples per second")->check(non_negative_number(1e6));
         cmd->add_option("--timeout", opt->timeout_s, "exit 1 if --count samples have not arrived within S seconds")
-            ->check(CLI::NonNegativeNumber);
+            ->check(non_negative_number(1e9));
         cmd->add_option("--format", opt->format, "text (human units), csv (SI, header first) or json (one per line)")
             ->check(CLI::IsMember({"text", "csv", "json"}))
             ->capture_default_str();

@@ -3,6 +3,8 @@
 #include <cstdio>
 #include <numbers>
 
+#include "bsn/logging/log.hpp"
+
 namespace bsn::services {
 namespace {
 
@@ -17,6 +19,9 @@ std::string printf_string(const char* fmt, auto... args) {
 std::string vec3(const std::array<double, 3>& v, double scale = 1.0) {
   return printf_string("[%8.3f %8.3f %8.3f]", v[0] * scale, v[1] * scale, v[2] * scale);
 }
+
+// Every string of a sample comes from the network: escaped, so that it cannot drive the terminal.
+std::string text(const std::string& s) { return logging::printable(s); }
 
 double seconds(std::uint64_t ns) { return static_cast<double>(ns) * 1e-9; }
 
@@ -52,14 +57,14 @@ std::string format_sample(const bsn::RawSample& s) {
   if (!(s.channels() & bsn::CHANNEL_ACC)) missing += " no-acc";
   if (!(s.channels() & bsn::CHANNEL_GYR)) missing += " no-gyr";
   if (!(s.channels() & bsn::CHANNEL_MAG)) missing += " no-mag";
-  return "raw " + s.node_id() +
+  return "raw " + text(s.node_id()) +
          printf_string(" seq=%llu t=%.6fs", static_cast<unsigned long long>(s.seq()), seconds(s.timestamp_ns())) +
          " acc=" + vec3(s.acc()) + " m/s2 gyr=" + vec3(s.gyr(), kDeg) + " deg/s mag=" + vec3(s.mag()) + " uT" + missing;
 }
 
 std::string format_sample(const bsn::Orientation& s, const char* prefix) {
   const auto& q = s.quat();
-  return std::string(prefix) + " " + s.segment() +
+  return std::string(prefix) + " " + text(s.segment()) +
          printf_string(" t=%.6fs yaw=%8.2f pitch=%7.2f roll=%8.2f deg q=[%.4f %.4f %.4f %.4f]",
                        seconds(s.timestamp_ns()), s.yaw() * kDeg, s.pitch() * kDeg, s.roll() * kDeg, q[0], q[1], q[2],
                        q[3]) +
@@ -68,43 +73,51 @@ std::string format_sample(const bsn::Orientation& s, const char* prefix) {
 
 std::string format_sample(const bsn::JointAngles& s) {
   const auto& a = s.angles();
-  return "joint " + s.joint() + " (" + s.parent() + " -> " + s.child() + ")" +
-         printf_string(" t=%.6fs %s=[%8.2f %8.2f %8.2f] deg", seconds(s.timestamp_ns()), s.axes().c_str(), a[0] * kDeg,
-                       a[1] * kDeg, a[2] * kDeg) +
+  return "joint " + text(s.joint()) + " (" + text(s.parent()) + " -> " + text(s.child()) + ")" +
+         printf_string(" t=%.6fs %s=[%8.2f %8.2f %8.2f] deg", seconds(s.timestamp_ns()), text(s.axes()).c_str(),
+                       a[0] * kDeg, a[1] * kDeg, a[2] * kDeg) +
          " flags=" + format_flags(s.flags());
 }
 
 std::string format_sample(const bsn::Status& s) {
-  std::string out = "status " + s.process_id() +
+  std::string out = "status " + text(s.process_id()) +
                     printf_string(" period=%.2fs unknown_node_samples=%llu qos_mismatches=%llu write_failures=%llu",
                                   s.period_s(), static_cast<unsigned long long>(s.unknown_node_samples()),
                                   static_cast<unsigned long long>(s.qos_mismatches()),
                                   static_cast<unsigned long long>(s.write_failures()));
+  if (s.undecodable_samples() || s.dds_lost_samples())
+    out += printf_string(" undecodable=%llu dds_lost=%llu", static_cast<unsigned long long>(s.undecodable_samples()),
+                         static_cast<unsigned long long>(s.dds_lost_samples()));
+  if (!s.unknown_nodes().empty()) {
+    out += " unknown_nodes=";
+    for (std::size_t i = 0; i < s.unknown_nodes().size(); ++i) out += (i ? "," : "") + text(s.unknown_nodes()[i]);
+  }
+  for (const std::string& other : s.other_fusion_processes()) out += " OTHER_FUSION=" + text(other);
   for (const auto& n : s.nodes()) {
     out +=
-        "\n  " + n.node_id() + " (" + n.segment() + ")" +
+        "\n  " + text(n.node_id()) + " (" + text(n.segment()) + ")" +
         printf_string(" %6.1f Hz received=%llu accepted=%llu missing=%llu clock_resets=%llu%s rejected:", n.rate_hz(),
                       static_cast<unsigned long long>(n.received()), static_cast<unsigned long long>(n.accepted()),
                       static_cast<unsigned long long>(n.missing()), static_cast<unsigned long long>(n.clock_resets()),
                       n.stale() ? " STALE" : "");
-    for (const auto& r : n.rejected()) out += " " + r.reason() + "=" + std::to_string(r.count());
+    for (const auto& r : n.rejected()) out += " " + text(r.reason()) + "=" + std::to_string(r.count());
   }
   return out;
 }
 
 std::string format_sample(const bsn::CalibrationRequest& s) {
-  return "calibration_request " + s.request_id() + " node=" + s.node_id() + " kind=" + kind_name(s.kind()) +
+  return "calibration_request " + text(s.request_id()) + " node=" + text(s.node_id()) + " kind=" + kind_name(s.kind()) +
          printf_string(" duration=%.1fs samples=%u", s.duration_s(), s.sample_count());
 }
 
 std::string format_sample(const bsn::CalibrationResult& s) {
   const auto& h = s.transform();
-  return "calibration_result " + s.node_id() + " request=" + s.request_id() + " kind=" + kind_name(s.kind()) +
-         (s.success() ? " ok" : " FAILED") + " bias=" + vec3(s.bias()) +
+  return "calibration_result " + text(s.node_id()) + " request=" + text(s.request_id()) +
+         " kind=" + kind_name(s.kind()) + (s.success() ? " ok" : " FAILED") + " bias=" + vec3(s.bias()) +
          printf_string(" H=[%.4f %.4f %.4f; %.4f %.4f %.4f; %.4f %.4f %.4f] M=%.3f residual=%.4f cond=%.1f poses=%u",
                        h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8], s.field_magnitude(), s.residual_rms(),
                        s.condition_number(), s.pose_count()) +
-         (s.message().empty() ? "" : " message=\"" + s.message() + "\"");
+         (s.message().empty() ? "" : " message=\"" + logging::printable(s.message(), 400) + "\"");
 }
 
 const char* phase_name(bsn::CalibrationPhase phase) {

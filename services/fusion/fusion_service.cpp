@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -46,7 +47,11 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
   joint_writer_ = participant_.make_writer(dds::kJointAnglesTopic, estimate(dds::kJointAnglesTopic));
   status_writer_ = participant_.make_writer(dds::kStatusTopic);
   last_status_ns_ = dds::monotonic_ns();
-  // The reader goes last: its callback may fire as soon as it exists.
+  // Another fusion service publishing any of our segments doubles every orientation and joint angle under the
+  // same keys: each notices the other's bsn/status (keyed by process id), warns and lists it in its own status.
+  status_reader_ = participant_.make_reader(
+      dds::kStatusTopic, [this](const bsn::Status& st, const eprosima::fastdds::dds::SampleInfo&) { on_status(st); });
+  // The raw reader goes last: its callback may fire as soon as it exists.
   raw_reader_ = participant_.make_reader(
       dds::kRawTopic, [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
   // Live calibrations (TRANSIENT_LOCAL: the ones published before this start arrive too and override the body
@@ -98,7 +103,8 @@ void FusionService::on_raw(const bsn::RawSample& raw) {
   const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now);
   if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
     if (r.new_unknown_node)
-      logging::log_warn("samples from node '", raw.node_id(), "', which is on no segment of the body model; ignored");
+      logging::log_warn("samples from node '", logging::printable(raw.node_id()),
+                        "', which is on no segment of the body model; ignored");
     return;
   }
   const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
@@ -111,6 +117,26 @@ void FusionService::on_raw(const bsn::RawSample& raw) {
   if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
   publish_orientation(r, raw.timestamp_ns());
   if (r.joint) publish_joint(*r.joint, raw.timestamp_ns());
+}
+
+void FusionService::on_status(const bsn::Status& other) {
+  if (other.process_id() == options_.process_id) return;
+  std::string shared;
+  for (const bsn::NodeStatus& n : other.nodes()) {
+    if (!fusion_.body().find_segment(n.segment())) continue;
+    if (!shared.empty()) shared += ", ";
+    shared += logging::printable(n.segment());
+  }
+  if (shared.empty()) return;
+  std::lock_guard lock(mutex_);
+  const std::string id = other.process_id().substr(0, kMaxListedIdChars);
+  if (std::find(other_fusions_.begin(), other_fusions_.end(), id) != other_fusions_.end()) return;
+  if (other_fusions_.size() >= kMaxOtherFusionsListed) return;
+  other_fusions_.push_back(id);
+  logging::log_warn("another fusion service, '", logging::printable(other.process_id()), "', publishes segments ",
+                    shared, " on this domain: every orientation and joint angle of them is published twice with ",
+                    "the same keys. Run one fusion service per body (or give each its own domain).");
+  status_due_ = true;
 }
 
 void FusionService::publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns) {
@@ -147,7 +173,10 @@ void FusionService::tick() {
     const fusion::SegmentSpec& spec = fusion_.body().segments[i];
     if (fusion_.segment(i).last_arrival_ns) logging::log_warn("node '", spec.node, "' (", spec.name, ") is stale");
   }
-  if (!turned_stale.empty() || seconds(now - last_status_ns_) >= options_.status_period_s) publish_status(now);
+  if (!turned_stale.empty() || status_due_ || seconds(now - last_status_ns_) >= options_.status_period_s) {
+    status_due_ = false;
+    publish_status(now);
+  }
 }
 
 void FusionService::publish_status(std::uint64_t now) {
@@ -184,15 +213,25 @@ void FusionService::publish_status(std::uint64_t now) {
   }
   st.nodes(std::move(nodes));
   st.unknown_node_samples(fusion_.unknown_node_samples());
-  st.unknown_nodes(fusion_.unknown_nodes());
+  // Unknown ids come from the network: listed at most kMaxListedIdChars long, so a status sample stays small.
+  std::vector<std::string> unknown;
+  for (const std::string& id : fusion_.unknown_nodes()) unknown.push_back(id.substr(0, kMaxListedIdChars));
+  st.unknown_nodes(std::move(unknown));
   st.qos_mismatches(participant_.qos_mismatches());
   st.write_failures(write_failures_);
   st.last_calibration_id(last_calibration_id_);
+  st.undecodable_samples(participant_.undecodable_samples());
+  st.dds_rejected_samples(participant_.rejected_samples());
+  st.dds_lost_samples(participant_.lost_samples());
+  st.other_fusion_processes(other_fusions_);
   status_writer_->write(st);
   last_status_ns_ = now;
 }
 
 namespace {
+
+// Longest duration an option takes: a day (a longer one overflows nothing, but means a typo).
+constexpr double kMaxSeconds = 86400.0;
 
 struct FusionCommandOptions {
   std::string body_path;  ///< "" = the default 7-segment lower body
@@ -236,14 +275,17 @@ Command fusion_command() {
             cmd->add_flag("--print-body", opt->print_body, "print the body model in effect as YAML and exit");
             cmd->add_option("--stale-timeout", opt->service.stale_timeout_s,
                             "seconds without samples before a node is stale")
-                ->capture_default_str();
+                ->capture_default_str()
+                ->check(positive_number(kMaxSeconds));
             cmd->add_option("--status-period", opt->service.status_period_s, "seconds between bsn/status samples")
-                ->capture_default_str();
+                ->capture_default_str()
+                ->check(positive_number(kMaxSeconds));
             cmd->add_flag("--best-effort", opt->service.best_effort,
                           "publish orientations and joint angles BEST_EFFORT instead of RELIABLE");
             cmd->add_option("--max-time-jump", opt->service.gate.max_forward_jump_s,
                             "a sensor timestamp more than S seconds ahead is rejected as a jump")
-                ->capture_default_str();
+                ->capture_default_str()
+                ->check(positive_number(kMaxSeconds));
             add_domain_option(cmd, opt->domain);
             return [opt] { return run_fusion(*opt); };
           }};

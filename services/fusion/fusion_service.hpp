@@ -34,6 +34,7 @@ class FusionService {
  private:
   void on_raw(const bsn::RawSample& raw);                     ///< called from the DDS thread
   void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
+  void on_status(const bsn::Status& status);  ///< another process's status (DDS thread): a second fusion?
   void publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);
   void publish_joint(const fusion::JointEstimate& j, std::uint64_t timestamp_ns);
   void publish_status(std::uint64_t now_ns);
@@ -48,6 +49,11 @@ class FusionService {
   std::unique_ptr<dds::Writer<bsn::Orientation>> orientation_writer_;
   std::unique_ptr<dds::Writer<bsn::JointAngles>> joint_writer_;
   std::unique_ptr<dds::Writer<bsn::Status>> status_writer_;
+  static constexpr std::size_t kMaxListedIdChars = 64;  ///< ids from the network listed on bsn/status
+  static constexpr std::size_t kMaxOtherFusionsListed = 16;
+  std::vector<std::string> other_fusions_;  ///< process ids of other fusion services publishing our segments
+  bool status_due_ = false;                 ///< publish bsn/status at the next tick (something new to report)
+  std::unique_ptr<dds::Reader<bsn::Status>> status_reader_;
   std::unique_ptr<dds::Reader<bsn::RawSample>> raw_reader_;
   std::unique_ptr<dds::Reader<bsn::CalibrationResult>> calibration_reader_;
   /// Live calibrations: per segment the request id last applied (bsn/status), per (segment, kind) to apply each

@@ -2,7 +2,10 @@
 // or option is answered with the nearest name.
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "process_fixture.hpp"
 
@@ -44,6 +47,67 @@ TEST_F(CliUsage, NoGuessForAWordFarFromEveryName) {
 
   EXPECT_EQ(run("none", {}), 2);
   EXPECT_NE(output("none").find("A subcommand is required"), std::string::npos) << output("none");
+  // Issue 16, item 6: the message says which commands there are, also after an unknown option alone.
+  EXPECT_NE(output("none").find("(one of: sim, fusion"), std::string::npos) << output("none");
+  EXPECT_EQ(run("option_only", {"-x"}), 2);
+  EXPECT_NE(output("option_only").find("(one of: sim, fusion"), std::string::npos) << output("option_only");
+  // A value after an unknown option is no command name: the command word after it is the one named.
+  EXPECT_EQ(run("value", {"--domain", "5", "fuson"}), 2);
+  EXPECT_NE(output("value").find("unknown command 'fuson'; did you mean 'fusion'?"), std::string::npos)
+      << output("value");
+}
+
+TEST_F(CliUsage, AbsurdNumbersAreRefusedAtParseTimeNamingTheOption) {
+  // Every numeric option of every command: negative, zero where it must be positive, not finite, or beyond any
+  // sensible value (issue 16, item 5). Exit 2 before anything runs, with the option in the message.
+  const std::string domain = std::to_string(test_domain(26));
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+      {{"fusion", "--stale-timeout", "-1"}, "--stale-timeout"},
+      {{"fusion", "--stale-timeout", "nan"}, "--stale-timeout"},
+      {{"fusion", "--status-period", "-1"}, "--status-period"},
+      {{"fusion", "--status-period", "0"}, "--status-period"},
+      {{"fusion", "--max-time-jump", "-1"}, "--max-time-jump"},
+      {{"fusion", "--max-time-jump", "1e300"}, "--max-time-jump"},
+      {{"sim", "--node", "n", "--duration", "-1"}, "--duration"},
+      {{"sim", "--node", "n", "--rate", "0"}, "--rate"},
+      {{"sim", "--node", "n", "--rate", "inf"}, "--rate"},
+      {{"sim", "--node", "n", "--speed", "-2"}, "--speed"},
+      {{"demo", "--rate", "-5"}, "--rate"},
+      {{"demo", "--duration", "-1"}, "--duration"},
+      {{"echo", "bsn/raw", "--count", "-1"}, "--count"},
+      {{"echo", "bsn/raw", "--rate", "-1"}, "--rate"},
+      {{"echo", "bsn/raw", "--timeout", "-3"}, "--timeout"},
+      {{"calibrate", "--input", "x.csv", "--field-magnitude", "-1"}, "--field-magnitude"},
+      {{"calibrate", "--input", "x.csv", "--rest-threshold", "0"}, "--rest-threshold"},
+      {{"calibrate", "--input", "x.csv", "--min-pose", "-1"}, "--min-pose"},
+  };
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    auto args = cases[i].first;
+    if (args[0] != "calibrate") args.insert(args.end(), {"--domain", domain});
+    const std::string name = "absurd" + std::to_string(i);
+    std::string command;
+    for (const auto& a : args) command += a + " ";
+    EXPECT_EQ(run(name, args), 2) << command << "\n" << output(name);
+    EXPECT_NE(output(name).find(cases[i].second + ": must be a finite number"), std::string::npos) << command << "\n"
+                                                                                                   << output(name);
+    EXPECT_EQ(output(name).find("joint"), std::string::npos) << command << " started running:\n" << output(name);
+  }
+}
+
+TEST_F(CliUsage, ADirectoryGivenAsAFileIsNamedSo) {
+  // Issue 16, item 6: a directory used to be reported as "the file is empty".
+  std::filesystem::create_directories(dir() / "adir");
+  EXPECT_EQ(run("body", {"fusion", "--body", (dir() / "adir").string(), "--domain", std::to_string(test_domain(26))}),
+            2);
+  EXPECT_NE(output("body").find("is a directory, not a body model file"), std::string::npos) << output("body");
+  write_file(dir() / "body.yaml", "segments:\n  - name: a\n    node: a\n    calibration: adir\n");
+  EXPECT_EQ(run("calibration",
+                {"fusion", "--body", (dir() / "body.yaml").string(), "--domain", std::to_string(test_domain(26))}),
+            2);
+  EXPECT_NE(output("calibration").find("is a directory, not a calibration file"), std::string::npos)
+      << output("calibration");
+  EXPECT_EQ(run("scenario", {"sim", "--scenario", (dir() / "adir").string(), "--out", (dir() / "o").string()}), 2);
+  EXPECT_NE(output("scenario").find("directory"), std::string::npos) << output("scenario");
 }
 
 TEST_F(CliUsage, HelpListsEveryCommandAndExitsZero) {

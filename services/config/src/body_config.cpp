@@ -178,11 +178,7 @@ BodyModel parse_body_model(const std::string& yaml_text, const std::string& sour
 }
 
 BodyModel load_body_model(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ConfigError(path + ": cannot open the body model file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse_body_model(text.str(), path);
+  return parse_body_model(read_config_file<ConfigError>(path, "body model"), path);
 }
 
 std::string body_model_to_yaml(const BodyModel& body) {

@@ -85,11 +85,7 @@ calib::SensorCalibration parse_calibration(const std::string& yaml_text, const s
 }
 
 CalibrationDocument load_calibration_document(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ConfigError(path + ": cannot open the calibration file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse_calibration_document(text.str(), path);
+  return parse_calibration_document(read_config_file<ConfigError>(path, "calibration"), path);
 }
 
 calib::SensorCalibration load_calibration_file(const std::string& path) {

@@ -2,6 +2,7 @@
 
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <filesystem>
@@ -17,6 +18,19 @@ using namespace eprosima::fastdds::dds;
 namespace {
 
 constexpr std::uint32_t kUdpReceiveBufferBytes = 4u * 1024u * 1024u;
+
+const char* rejected_reason_name(SampleRejectedStatusKind kind) {
+  switch (kind) {
+    case REJECTED_BY_INSTANCES_LIMIT:
+      return "max_instances";
+    case REJECTED_BY_SAMPLES_LIMIT:
+      return "max_samples";
+    case REJECTED_BY_SAMPLES_PER_INSTANCE_LIMIT:
+      return "max_samples_per_instance";
+    default:
+      return "limit";
+  }
+}
 
 class WriterEvents final : public DataWriterListener {
  public:
@@ -48,6 +62,19 @@ class ReaderEvents final : public DataReaderListener {
   void on_liveliness_changed(DataReader*, const LivelinessChangedStatus& s) override {
     events_->alive_writers.store(s.alive_count);
     if (s.not_alive_count_change > 0) events_->writers_lost += static_cast<std::uint64_t>(s.not_alive_count_change);
+  }
+  // Losses are counted from the writers' sequence numbers (count_lost), which covers these statuses too: they are
+  // only logged, once.
+  void on_sample_rejected(DataReader*, const SampleRejectedStatus& s) override {
+    if (events_->rejected_counter) *events_->rejected_counter += s.total_count_change;
+    if (s.total_count == s.total_count_change)
+      logging::log_warn("topic ", events_->topic, ": DDS dropped sample(s) at this reader's resource limit (",
+                        rejected_reason_name(s.last_reason), "); counted on bsn/status as dds_lost_samples");
+  }
+  void on_sample_lost(DataReader*, const SampleLostStatus& s) override {
+    if (s.total_count == s.total_count_change)
+      logging::log_warn("topic ", events_->topic, ": DDS lost sample(s) on the way to this reader; counted on ",
+                        "bsn/status as dds_lost_samples");
   }
   void on_requested_incompatible_qos(DataReader*, const RequestedIncompatibleQosStatus& s) override {
     if (events_->mismatch_counter) ++*events_->mismatch_counter;
@@ -134,6 +161,26 @@ std::string refused_by_permissions() {
 
 }  // namespace
 
+void count_undecodable(EndpointEvents& events) {
+  if (!events.undecodable_counter) return;
+  if ((*events.undecodable_counter)++ == 0)
+    logging::log_warn("topic ", events.topic, ": a sample that does not decode as this topic's type was dropped ",
+                      "(a writer with another definition of the type?); counted on bsn/status as undecodable_samples");
+}
+
+void count_lost(EndpointEvents& events, const SampleInfo& info) {
+  const std::int64_t seq = info.sample_identity.sequence_number().to64long();
+  auto [it, first] = events.last_sequence.try_emplace(info.sample_identity.writer_guid(), seq);
+  if (first) return;  // samples before a reader matches are not its losses
+  if (seq > it->second + 1) {
+    const auto lost = static_cast<std::uint64_t>(seq - it->second - 1);
+    if (events.lost_counter && (*events.lost_counter += lost) == lost)
+      logging::log_warn("topic ", events.topic, ": ", lost, " sample(s) of a writer never arrived (a DDS resource ",
+                        "limit, a full history or the network); counted on bsn/status as dds_lost_samples");
+  }
+  it->second = std::max(it->second, seq);
+}
+
 int default_domain() {
   if (const char* env = std::getenv("BSN_DOMAIN")) {
     char* end = nullptr;
@@ -200,6 +247,9 @@ void Participant::create_reader(eprosima::fastdds::dds::Topic* topic, TopicQos d
     qos = reader_qos(delivery, subscriber_->get_default_datareader_qos());
   events->topic = topic->get_name();
   events->mismatch_counter = &qos_mismatches_;
+  events->undecodable_counter = &undecodable_samples_;
+  events->lost_counter = &lost_samples_;
+  events->rejected_counter = &rejected_samples_;
   auto listener = std::make_unique<ReaderEvents>(events);
   DataReader* r = subscriber_->create_datareader(topic, qos, listener.get(), StatusMask::all());
   if (!r) throw std::runtime_error("cannot create a DDS reader on " + topic->get_name() + refused_by_permissions());

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -62,6 +63,8 @@ std::vector<std::string> split(const std::string& line) {
 }  // namespace
 
 Recording read_csv(const std::string& path) {
+  if (std::error_code ec; std::filesystem::is_directory(path, ec))
+    throw IoError(path + ": is a directory, not a CSV file");
   std::ifstream in(path);
   if (!in) throw IoError(path + ": cannot open");
   std::string line;
@@ -119,9 +122,12 @@ Recording read_csv(const std::string& path) {
     for (int k = 0; k < 4; ++k) r[static_cast<std::size_t>(9 + k)] = has_quat ? number(c_q[k], true) : std::nan("");
     rows.push_back(r);
     const double t = number(c_t, false);
-    if (!(t >= 0.0)) throw IoError(path + ":" + std::to_string(line_no) + ": time must be >= 0");
+    // Beyond 9e18 ns (285 years) a time does not fit the integer nanoseconds it becomes: corrupt, not a time.
+    const double t_ns = time_in_ns ? t : t * 1e9;
+    if (!(t_ns >= 0.0 && t_ns < 9e18))
+      throw IoError(path + ":" + std::to_string(line_no) + ": time must be >= 0 and below 9e18 ns");
     rec.timestamp_ns.push_back(time_in_ns ? static_cast<std::uint64_t>(t)
-                                          : static_cast<std::uint64_t>(std::llround(t * 1e9)));
+                                          : static_cast<std::uint64_t>(std::llround(t_ns)));
     if (has_movement) rec.movement.push_back(number(col.at("movement"), false) != 0.0 ? 1 : 0);
   }
   const auto n = static_cast<Eigen::Index>(rows.size());

@@ -1,5 +1,6 @@
 #include "bsn/logging/log.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <ctime>
@@ -54,6 +55,25 @@ void log_line(LogLevel level, std::string_view message) {
   std::strftime(stamp, sizeof stamp, "%H:%M:%S", &tm);
   std::fprintf(stderr, "%s.%03lld [%s] %s: %.*s\n", stamp, static_cast<long long>(ms), c.role.c_str(),
                level_name(level), static_cast<int>(message.size()), message.data());
+}
+
+std::string printable(std::string_view text, std::size_t max_chars) {
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out;
+  const std::size_t n = std::min(text.size(), max_chars);
+  out.reserve(n + 16);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c >= 0x20 && c < 0x7f && c != '\\') {
+      out += static_cast<char>(c);
+    } else {
+      out += "\\x";
+      out += kHex[c >> 4];
+      out += kHex[c & 0xf];
+    }
+  }
+  if (text.size() > n) out += "...(" + std::to_string(text.size() - n) + " more)";
+  return out;
 }
 
 }  // namespace bsn::logging

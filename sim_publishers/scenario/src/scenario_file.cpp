@@ -364,11 +364,7 @@ ScenarioSpec parse_scenario(const std::string& yaml_text, const std::string& sou
 }
 
 ScenarioSpec load_scenario(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw ScenarioError(path + ": cannot open the scenario file");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse_scenario(text.str(), path);
+  return parse_scenario(config::read_config_file<ScenarioError>(path, "scenario"), path);
 }
 
 }  // namespace bsn::sim

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 
 #include "bsn/fusion/sample_gate.hpp"
 
@@ -76,6 +77,58 @@ TEST(SampleGate, MissingSamplesFromSequenceGaps) {
   EXPECT_EQ(g.counters().accepted, 3u);
   g.check(3, at(40 * kMs));  // late arrival of a sample counted missing: rejected, and no new loss
   EXPECT_EQ(g.counters().missing, 3u);
+}
+
+TEST(SampleGate, SequenceWrapIsNoLoss) {
+  // seq is a uint64 that wraps from 2^64 - 1 to 0 like any counter; the wrap loses nothing, a gap across it does.
+  SampleGate g;
+  constexpr std::uint64_t kTop = std::numeric_limits<std::uint64_t>::max();
+  std::uint64_t seq = kTop - 50;
+  for (int k = 0; k < 100; ++k) g.check(seq++, at(static_cast<std::uint64_t>(k) * 10 * kMs));
+  EXPECT_EQ(g.counters().accepted, 100u);
+  EXPECT_EQ(g.counters().missing, 0u);
+  g.check(seq + 2, at(100 * 10 * kMs));  // two lost right after the wrap
+  EXPECT_EQ(g.counters().missing, 2u);
+  SampleGate h;
+  h.check(kTop - 1, at(0));
+  h.check(1, at(10 * kMs));  // kTop and 0 lost across the wrap
+  EXPECT_EQ(h.counters().missing, 2u);
+}
+
+TEST(SampleGate, RejectedSamplesDoNotMoveTheSequenceBase) {
+  // One hostile sample with seq 2^64 - 1 (or any far number) inside a real stream is rejected and leaves the
+  // sequence base where it was: the stream that follows loses nothing.
+  constexpr std::uint64_t kTop = std::numeric_limits<std::uint64_t>::max();
+  for (const std::uint64_t hostile_seq : {kTop, kTop / 2, std::uint64_t{1} << 40, std::uint64_t{0}}) {
+    SampleGate g;
+    std::uint64_t t = 1000 * kMs;
+    for (std::uint64_t k = 10; k < 20; ++k) g.check(k, at(t += 10 * kMs));
+    ImuSample nan = at(t + 5 * kMs);
+    nan.acc.x() = std::nan("");
+    EXPECT_EQ(g.check(hostile_seq, nan), SampleVerdict::kNonFinite);
+    EXPECT_EQ(g.check(hostile_seq, at(t - 5 * kMs)), SampleVerdict::kTimeBackward);
+    EXPECT_EQ(g.check(hostile_seq, at(t + 100'000 * kMs)), SampleVerdict::kTimeJump);
+    for (std::uint64_t k = 20; k < 1000; ++k) g.check(k, at(t += 10 * kMs));
+    EXPECT_EQ(g.counters().missing, 0u) << "hostile seq " << hostile_seq;
+    EXPECT_EQ(g.counters().accepted, 990u);
+  }
+}
+
+TEST(SampleGate, AnImplausibleSequenceJumpIsARestartNotALoss) {
+  // An accepted sample whose seq jumps further than max_sequence_gap (a node that renumbered, or a forged seq
+  // with a plausible time) restarts the count: it cannot be that many samples lost within max_forward_jump_s.
+  SampleGate g;
+  std::uint64_t t = 0;
+  for (std::uint64_t k = 0; k < 10; ++k) g.check(k, at(t += 10 * kMs));
+  g.check(std::uint64_t{1} << 50, at(t += 10 * kMs));
+  EXPECT_EQ(g.counters().missing, 0u);
+  g.check((std::uint64_t{1} << 50) + 3, at(t += 10 * kMs));  // 2 lost after the restart
+  EXPECT_EQ(g.counters().missing, 2u);
+  g.check(5, at(t += 10 * kMs));  // renumbered backwards: also a restart
+  g.check(6, at(t += 10 * kMs));
+  g.check(8, at(t += 10 * kMs));  // 7 lost
+  EXPECT_EQ(g.counters().missing, 3u);
+  EXPECT_EQ(g.counters().accepted, 15u);
 }
 
 TEST(SampleGate, AdoptsANewTimeBaseAfterConsistentSamples) {

@@ -8,6 +8,8 @@
 #include <fstream>
 #include <iterator>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "bsn/io/recording.hpp"
 
@@ -131,6 +133,23 @@ TEST(Csv, ErrorsNameFileLineAndProblem) {
     FAIL();
   } catch (const IoError& e) {
     EXPECT_NE(std::string(e.what()).find("n.csv:3: 'abc' is not a number"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Csv, ATimeBeyondIntegerNanosecondsIsAnErrorNotUndefinedBehaviour) {
+  // Found by the csv fuzz target: 1e82 ns (or 1e300 s) was converted to uint64, which is undefined behaviour.
+  TempDir dir;
+  const std::vector<std::pair<std::string, std::string>> cases = {{"t_ns", "1e82"}, {"t_s", "1e300"}, {"t_s", "inf"}};
+  for (const auto& [column, value] : cases) {
+    std::ofstream(dir.file("t.csv")) << column << ",acc_x,acc_y,acc_z,gyr_x,gyr_y,gyr_z\n0,0,0,9.8,0,0,0\n"
+                                     << value << ",0,0,9.8,0,0,0\n";
+    try {
+      read_csv(dir.file("t.csv"));
+      ADD_FAILURE() << "accepted " << column << " = " << value;
+    } catch (const IoError& e) {
+      EXPECT_NE(std::string(e.what()).find("t.csv:3: time must be >= 0 and below 9e18 ns"), std::string::npos)
+          << e.what();
+    }
   }
 }
 

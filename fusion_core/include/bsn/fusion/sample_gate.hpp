@@ -45,12 +45,17 @@ class SampleGate {
     double max_abs_acc_m_s2 = 2000.0;
     double max_abs_gyr_rad_s = 100.0;
     double max_abs_mag_ut = 10000.0;
+    /// Largest forward step of the sequence number between two accepted samples that counts as lost samples;
+    /// a longer step (a node that renumbered, a forged seq) restarts the count instead. Accepted samples are at
+    /// most max_forward_jump_s apart, so this is the loss of 1 s at 100 kHz. Default 100000.
+    std::uint64_t max_sequence_gap = 100'000;
   };
 
   struct Counters {
     std::uint64_t received = 0;
     std::uint64_t accepted = 0;
-    std::uint64_t missing = 0;                                    ///< samples lost, from jumps in the sequence number
+    std::uint64_t missing =
+        0;  ///< samples lost: sequence numbers skipped between accepted samples, less those rejected
     std::uint64_t clock_resets = 0;                               ///< new time bases adopted
     std::array<std::uint64_t, kRejectionReasonCount> rejected{};  ///< by rejection_index()
   };
@@ -66,6 +71,7 @@ class SampleGate {
 
  private:
   SampleVerdict reject_time(SampleVerdict reason, std::uint64_t seq, std::uint64_t t_ns);
+  SampleVerdict reject(SampleVerdict reason, std::uint64_t seq);
   SampleVerdict accept(SampleVerdict verdict, std::uint64_t seq, std::uint64_t t_ns);
 
   Params params_;
@@ -75,9 +81,13 @@ class SampleGate {
   bool have_last_ = false;
   std::uint64_t last_seq_ = 0;
   std::uint64_t last_ns_ = 0;
-  bool seen_any_ = false;
-  std::uint64_t max_seq_seen_ = 0;  ///< highest sequence number received, for the missing count
-  int candidate_count_ = 0;         ///< consecutive samples on a candidate new time base
+  void count_missing(std::uint64_t seq, bool restart);
+
+  // The sequence base moves with accepted samples only, so that no rejected (possibly forged) number moves it.
+  // Steps are taken modulo 2^64: a wrap from 2^64 - 1 to 0 is one step.
+  std::uint64_t next_seq_ = 0;            ///< the sequence number expected after the last accepted sample
+  std::uint64_t rejected_in_window_ = 0;  ///< rejected since the last accepted sample with a plausible seq ahead
+  int candidate_count_ = 0;               ///< consecutive samples on a candidate new time base
   std::uint64_t candidate_ns_ = 0;
 };
 

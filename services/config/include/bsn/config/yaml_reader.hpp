@@ -4,12 +4,32 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
 #include <initializer_list>
+#include <sstream>
 #include <string>
 #include <string_view>
 
 namespace bsn::config {
+
+/// The whole text of the `what` file at `path` ("body model", "calibration", ...); throws Error with a message that
+/// says what is wrong: "PATH: is a directory, not a body model file", "PATH: cannot open the body model file (No
+/// such file or directory)".
+template <class Error>
+std::string read_config_file(const std::string& path, const std::string& what) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw Error(path + ": is a directory, not a " + what + " file");
+  std::ifstream in(path);
+  if (!in) throw Error(path + ": cannot open the " + what + " file (" + std::strerror(errno) + ")");
+  std::stringstream text;
+  text << in.rdbuf();
+  if (in.bad()) throw Error(path + ": cannot read the " + what + " file");
+  return text.str();
+}
 
 template <class Error>
 class YamlReader {

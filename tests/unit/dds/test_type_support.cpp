@@ -1,0 +1,86 @@
+// Guarded<PubSub>: what fastddsgen's type support throws on (a key too long for its buffer, a bool byte that is
+// neither 0 nor 1) and what it half-decodes (a truncated payload) become a handle, or a refused sample with the
+// reader's flag raised and nothing of the bytes left in it.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "bsn/dds/type_support.hpp"
+#include "bsn_idl/bsnPubSubTypes.h"
+
+namespace bsn::dds {
+namespace {
+
+using eprosima::fastrtps::rtps::InstanceHandle_t;
+using eprosima::fastrtps::rtps::SerializedPayload_t;
+
+template <class PubSub>
+SerializedPayload_t serialized(Guarded<PubSub>& type, typename PubSub::type sample) {
+  SerializedPayload_t payload(type.getSerializedSizeProvider(&sample)());
+  EXPECT_TRUE(type.serialize(&sample, &payload));
+  return payload;
+}
+
+TEST(GuardedTypeSupport, AKeyLongerThanTheGeneratedBufferGetsTheSpecificationsHandle) {
+  Guarded<bsn::RawSamplePubSubType> type;
+  bsn::RawSample sample;
+  // A short key: the generated code's handle (MD5, the key's maximum size exceeds 16 bytes) and ours agree.
+  sample.node_id("thigh_l");
+  InstanceHandle_t generated, ours;
+  ASSERT_TRUE(type.getKey(&sample, &generated));
+  ASSERT_TRUE(Guarded<bsn::RawSamplePubSubType>::md5_key(sample, &ours));
+  EXPECT_EQ(generated, ours);
+  // 256 and 300 characters: the generated code throws; ours gives distinct handles.
+  sample.node_id(std::string(256, 'x'));
+  InstanceHandle_t h256, h300;
+  EXPECT_THROW(type.bsn::RawSamplePubSubType::getKey(&sample, &h256), std::exception);
+  ASSERT_TRUE(type.getKey(&sample, &h256));
+  sample.node_id(std::string(300, 'x'));
+  ASSERT_TRUE(type.getKey(&sample, &h300));
+  EXPECT_NE(h256, h300);
+  EXPECT_NE(h256, generated);
+}
+
+TEST(GuardedTypeSupport, ABoolThatIsNeitherZeroNorOneIsRefusedNotThrown) {
+  Guarded<bsn::CalibrationResultPubSubType> type;
+  bsn::CalibrationResult result;
+  result.node_id("a");
+  result.success(true);
+  result.message("fit");
+  SerializedPayload_t payload = serialized(type, result);
+  // After the 4-byte header: node_id "a" (length 4 + 2 bytes), request_id "" (aligned to 8, 4 + 1 bytes), kind
+  // (aligned to 16, 4 bytes); the bool is the byte at 20.
+  const std::size_t at = 4 + 20;
+  ASSERT_EQ(payload.data[at], 1);
+  payload.data[at] = 2;
+  bsn::CalibrationResult decoded;
+  decoded.message("stale content");
+  EXPECT_THROW(type.bsn::CalibrationResultPubSubType::deserialize(&payload, &decoded), std::exception);
+  EXPECT_FALSE(type.deserialize(&payload, &decoded));
+  EXPECT_TRUE(last_deserialize_failed());
+  EXPECT_EQ(decoded, bsn::CalibrationResult());
+}
+
+TEST(GuardedTypeSupport, ATruncatedPayloadIsRefusedAndLeavesNothingOfItsBytes) {
+  Guarded<bsn::RawSamplePubSubType> type;
+  bsn::RawSample sample;
+  sample.node_id("pelvis");
+  sample.seq(42);
+  SerializedPayload_t payload = serialized(type, sample);
+  payload.length = 24;  // header, node_id, and part of the timestamp
+  bsn::RawSample decoded;
+  EXPECT_FALSE(type.deserialize(&payload, &decoded));
+  EXPECT_TRUE(last_deserialize_failed());
+  EXPECT_EQ(decoded, bsn::RawSample());
+  // The next good one clears the flag.
+  payload.length = serialized(type, sample).length;
+  EXPECT_TRUE(type.deserialize(&payload, &decoded));
+  EXPECT_FALSE(last_deserialize_failed());
+  EXPECT_EQ(decoded.node_id(), "pelvis");
+  EXPECT_EQ(decoded.seq(), 42u);
+}
+
+}  // namespace
+}  // namespace bsn::dds
