@@ -46,7 +46,7 @@ TEST_F(HostileInput, ForeignWriterWithANodeIdTooLongForTheGeneratedKeyCode) {
   // Cyclone DDS sends node ids of 300 characters: the IDL's `string` is unbounded, fastddsgen's key code holds 255.
   // bsn fusion and bsn echo aborted on the first such sample (issue 16, item 1); now both keep running and the
   // fusion reports the samples as an unknown node.
-  const int kDomain = test_domain(12);
+  const int kDomain = test_domain(49);
   const std::string domain = std::to_string(kDomain);
   write_file(dir() / "body.yaml", "segments:\n  - name: cy\n    node: cy\n");
   spawn("fusion", {"fusion", "--domain", domain, "--body", (dir() / "body.yaml").string()});
@@ -94,7 +94,7 @@ TEST_F(HostileInput, ForeignWriterWithANodeIdTooLongForTheGeneratedKeyCode) {
 TEST_F(HostileInput, IdsFromTheNetworkArePrintedEscaped) {
   // A node id that clears the screen and forges a log line (issue 16, item 8) reaches the log and bsn echo as
   // visible escapes.
-  const int kDomain = test_domain(16);
+  const int kDomain = test_domain(53);
   const std::string domain = std::to_string(kDomain);
   write_file(dir() / "body.yaml", "segments:\n  - name: solo\n    node: b1\n");
   spawn("fusion", {"fusion", "--domain", domain, "--body", (dir() / "body.yaml").string()});
@@ -132,7 +132,7 @@ TEST_F(HostileInput, SamplesBeyondTheInstanceLimitAreCounted) {
   // stops at 4096 instances itself). The fusion's reader holds 4096 instances; Fast DDS 2.9.1 dropped the rest
   // without a word (issue 16, item 2). Every sample reaches the count of unknown-node samples or of samples lost in
   // DDS: none disappears without a number.
-  const int kDomain = test_domain(13);
+  const int kDomain = test_domain(50);
   constexpr int kIds = 5009;
   spawn("fusion", {"fusion", "--domain", std::to_string(kDomain)});
   StatusLog statuses;
@@ -200,7 +200,7 @@ TEST_F(HostileInput, SamplesBeyondTheInstanceLimitAreCounted) {
 TEST_F(HostileInput, TwoFusionServicesOnOneDomainNoticeEachOther) {
   // Both would publish every orientation and joint angle under the same keys (issue 16, item 9): each warns and
   // lists the other's process id on its own bsn/status.
-  const int kDomain = test_domain(14);
+  const int kDomain = test_domain(51);
   const std::string domain = std::to_string(kDomain);
   auto& a = spawn("fusion_a", {"fusion", "--domain", domain});
   auto& b = spawn("fusion_b", {"fusion", "--domain", domain});
@@ -231,7 +231,7 @@ TEST_F(HostileInput, TwoFusionServicesOnOneDomainNoticeEachOther) {
 
 TEST_F(HostileInput, DemoKilledWithSigkillLeavesNoFolder) {
   // SIGKILL gives the demo no chance to clean up; its reaper removes the log folder (issue 16, item 7).
-  const int kDomain = test_domain(15);
+  const int kDomain = test_domain(52);
   const std::filesystem::path tmp = dir() / "tmp";
   std::filesystem::create_directories(tmp);
   const char* old_tmpdir = std::getenv("TMPDIR");
