@@ -40,7 +40,7 @@ std::string_view rejection_reason_name(std::size_t index) {
 SampleGate::SampleGate(const Params& params) : params_(params) {
   if (!(params.max_forward_jump_s > 0.0) || !(params.max_rebase_step_s > 0.0) || params.rebase_after < 1 ||
       !(params.max_abs_acc_m_s2 > 0.0) || !(params.max_abs_gyr_rad_s > 0.0) || !(params.max_abs_mag_ut > 0.0) ||
-      params.max_sequence_gap < 1) {
+      params.max_sequence_gap < 1 || !(params.outage_tolerance >= 0.0 && params.outage_tolerance < 1.0)) {
     throw std::invalid_argument("sample gate: every limit must be > 0 and rebase_after >= 1");
   }
   max_jump_ns_ = seconds_to_ns(params.max_forward_jump_s);
@@ -63,6 +63,7 @@ SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
   } else if (s.timestamp_ns <= last_ns_) {
     return reject_time(SampleVerdict::kTimeBackward, seq, s.timestamp_ns);
   } else if (s.timestamp_ns - last_ns_ > max_jump_ns_) {
+    if (explained_by_lost_samples(seq, s.timestamp_ns)) return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
     return reject_time(SampleVerdict::kTimeJump, seq, s.timestamp_ns);
   } else {
     return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
@@ -104,8 +105,21 @@ SampleVerdict SampleGate::reject_time(SampleVerdict reason, std::uint64_t seq, s
   return reject(reason, seq);
 }
 
+bool SampleGate::explained_by_lost_samples(std::uint64_t seq, std::uint64_t t_ns) const {
+  const std::uint64_t steps = seq - last_seq_;  // modulo 2^64, like the missing count
+  if (!(period_ns_ > 0.0) || steps < 2 || steps >= params_.max_sequence_gap) return false;
+  const double expected_ns = static_cast<double>(steps) * period_ns_;
+  return std::abs(static_cast<double>(t_ns - last_ns_) - expected_ns) <= params_.outage_tolerance * expected_ns;
+}
+
 SampleVerdict SampleGate::accept(SampleVerdict verdict, std::uint64_t seq, std::uint64_t t_ns) {
   ++counters_.accepted;
+  // The period, from consecutive samples only (a gap or a new time base says nothing about it); a slow average,
+  // so one late sample barely moves it.
+  if (have_last_ && verdict == SampleVerdict::kAccepted && seq - last_seq_ == 1 && t_ns > last_ns_) {
+    const double dt = static_cast<double>(t_ns - last_ns_);
+    period_ns_ = period_ns_ > 0.0 ? period_ns_ + (dt - period_ns_) / 16.0 : dt;
+  }
   count_missing(seq, verdict == SampleVerdict::kAcceptedClockReset);
   have_last_ = true;
   last_seq_ = seq;

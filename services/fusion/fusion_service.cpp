@@ -36,7 +36,8 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
     : participant_(participant),
       options_(std::move(options)),
       fusion_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
-      accepted_at_last_status_(fusion_.body().segments.size(), 0),
+      accepted_at_window_start_(fusion_.body().segments.size(), 0),
+      rate_hz_(fusion_.body().segments.size(), 0.0),
       calibration_id_(fusion_.body().segments.size()) {
   if (options_.process_id.empty()) options_.process_id = default_process_id();
   // --best-effort switches both estimate topics from their own delivery to BEST_EFFORT.
@@ -46,7 +47,7 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
   orientation_writer_ = participant_.make_writer(dds::kOrientationTopic, estimate(dds::kOrientationTopic));
   joint_writer_ = participant_.make_writer(dds::kJointAnglesTopic, estimate(dds::kJointAnglesTopic));
   status_writer_ = participant_.make_writer(dds::kStatusTopic);
-  last_status_ns_ = dds::monotonic_ns();
+  last_status_ns_ = rate_window_start_ns_ = dds::monotonic_ns();
   // Another fusion service publishing any of our segments doubles every orientation and joint angle under the
   // same keys: each notices the other's bsn/status (keyed by process id), warns and lists it in its own status.
   status_reader_ = participant_.make_reader(
@@ -180,13 +181,18 @@ void FusionService::tick() {
 }
 
 void FusionService::publish_status(std::uint64_t now) {
-  const double period = seconds(now - last_status_ns_);
+  const double window = seconds(now - rate_window_start_ns_);
+  const bool window_complete = window >= options_.status_period_s;
+  if (window_complete) {
+    rate_window_s_ = window;
+    rate_window_start_ns_ = now;
+  }
   bsn::Status st;
   st.process_id(options_.process_id);
   st.wall_time_ns(static_cast<std::uint64_t>(
       std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::system_clock::now().time_since_epoch())
           .count()));
-  st.period_s(period);
+  st.period_s(rate_window_s_);
   std::vector<bsn::NodeStatus> nodes;
   for (std::size_t i = 0; i < fusion_.body().segments.size(); ++i) {
     const fusion::SegmentSpec& spec = fusion_.body().segments[i];
@@ -195,8 +201,11 @@ void FusionService::publish_status(std::uint64_t now) {
     bsn::NodeStatus n;
     n.node_id(spec.node);
     n.segment(spec.name);
-    n.rate_hz(period > 0.0 ? static_cast<double>(c.accepted - accepted_at_last_status_[i]) / period : 0.0);
-    accepted_at_last_status_[i] = c.accepted;
+    if (window_complete) {
+      rate_hz_[i] = static_cast<double>(c.accepted - accepted_at_window_start_[i]) / window;
+      accepted_at_window_start_[i] = c.accepted;
+    }
+    n.rate_hz(rate_hz_[i]);
     n.received(c.received);
     n.accepted(c.accepted);
     n.missing(c.missing);

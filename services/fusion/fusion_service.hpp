@@ -43,7 +43,12 @@ class FusionService {
   Options options_;
   std::mutex mutex_;
   fusion::BodyFusion fusion_;
-  std::vector<std::uint64_t> accepted_at_last_status_;  ///< per segment, for the rate
+  // Rates are counted over windows of at least one status period, so that an early status (a node turning
+  // stale or fresh) does not divide a burst by a few milliseconds.
+  std::vector<std::uint64_t> accepted_at_window_start_;  ///< per segment
+  std::vector<double> rate_hz_;                          ///< per segment, over the last full window
+  std::uint64_t rate_window_start_ns_ = 0;
+  double rate_window_s_ = 0.0;  ///< length of the last full window
   std::uint64_t write_failures_ = 0;
   std::uint64_t last_status_ns_ = 0;
   std::unique_ptr<dds::Writer<bsn::Orientation>> orientation_writer_;

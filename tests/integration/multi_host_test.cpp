@@ -16,6 +16,7 @@
 #include <cstring>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <regex>
 #include <sstream>
 #include <string>
@@ -252,6 +253,96 @@ TEST_F(MultiHost, DiscoveryServerWithMulticastBlocked) {
   spawn_command("orientations", echo_of({"bsn/orientation", "--count", "4200", "--timeout", "10"}));
   child("orientations").wait_for(15s);
   expect_full_rate_in_echo_log(read_file(log_path("orientations")), 4.0);
+}
+
+// A 5 s cut of the sensor host's link is an outage, not a clock reset: every node is stale within 0.5 s of the
+// cut, back within 1 s of the link's return, its filter restarted by the gap rule, and no clock reset or time
+// jump is counted.
+TEST_F(MultiHost, LinkCutIsAGapNotAClockReset) {
+  const int domain = test_domain(54);
+  std::mutex mutex;
+  struct NodeSeen {
+    bool stale = false;
+    std::uint64_t clock_resets = 0, time_jumps = 0, missing = 0;
+  };
+  std::map<std::string, NodeSeen> nodes;
+  std::optional<Clock::time_point> all_stale_at;
+  Clock::time_point link_up{};
+  std::map<std::string, Clock::time_point> back_at;  // first orientation after the link returned
+  std::map<std::string, bool> restarted;             // ... and whether it says the filter re-initialised
+  std::unique_ptr<dds::Reader<bsn::Status>> status_reader;
+  std::unique_ptr<dds::Reader<bsn::Orientation>> orientation_reader;
+  ASSERT_TRUE(run_in_namespace(hosts_->ns("viewer"), [&] {
+    viewer_ = std::make_unique<dds::Participant>(dds::Participant::Options{domain, "multi-host viewer"});
+    status_reader = viewer_->make_reader(dds::kStatusTopic, [&](const bsn::Status& st, const SampleInfo&) {
+      std::lock_guard lock(mutex);
+      bool every_stale = st.nodes().size() == kNodes.size();
+      for (const auto& n : st.nodes()) {
+        NodeSeen& seen = nodes[n.node_id()];
+        seen.stale = n.stale();
+        seen.clock_resets = n.clock_resets();
+        seen.missing = n.missing();
+        for (const auto& r : n.rejected())
+          if (r.reason() == "time_jump") seen.time_jumps = r.count();
+        every_stale = every_stale && n.stale();
+      }
+      if (every_stale && !all_stale_at) all_stale_at = Clock::now();
+    });
+    orientation_reader =
+        viewer_->make_reader(dds::kOrientationTopic, [&](const bsn::Orientation& o, const SampleInfo&) {
+          std::lock_guard lock(mutex);
+          ++counts_.per_segment[o.segment()];
+          if (link_up != Clock::time_point{} && !back_at.count(o.segment()) && !(o.flags() & bsn::FLAG_STALE)) {
+            back_at[o.segment()] = Clock::now();
+            restarted[o.segment()] = (o.flags() & bsn::FLAG_REINITIALISED) != 0;
+          }
+        });
+  })) << "cannot enter the viewer's namespace";
+  start_body(domain);
+  ASSERT_TRUE(wait_until([&] { return counts_.snapshot().size() == kNodes.size(); }, 30s));
+  std::this_thread::sleep_for(2s);
+
+  const std::string link = "ip -n " + hosts_->ns("sensors") + " link set eth0 ";
+  const auto cut_at = Clock::now();
+  ASSERT_TRUE(run(link + "down"));
+  ASSERT_TRUE(wait_until(
+      [&] {
+        std::lock_guard lock(mutex);
+        return all_stale_at.has_value();
+      },
+      3s))
+      << "not every node was reported stale after the cut";
+  {
+    std::lock_guard lock(mutex);
+    EXPECT_LE(std::chrono::duration<double>(*all_stale_at - cut_at).count(), 0.5);
+  }
+  std::this_thread::sleep_until(cut_at + 5s);
+  {
+    std::lock_guard lock(mutex);
+    link_up = Clock::now();
+  }
+  ASSERT_TRUE(run(link + "up"));
+  EXPECT_TRUE(wait_until(
+      [&] {
+        std::lock_guard lock(mutex);
+        return back_at.size() == kNodes.size();
+      },
+      3s))
+      << "segments back after the link returned: " << back_at.size();
+  std::this_thread::sleep_for(1500ms);  // a status period after the return
+  std::lock_guard lock(mutex);
+  for (const std::string& node : kNodes) {
+    SCOPED_TRACE(node);
+    ASSERT_TRUE(back_at.count(node));
+    EXPECT_LE(std::chrono::duration<double>(back_at[node] - link_up).count(), 1.0);
+    EXPECT_TRUE(restarted[node]) << "the first estimate after the outage does not say the filter restarted";
+    EXPECT_FALSE(nodes[node].stale);
+    EXPECT_EQ(nodes[node].clock_resets, 0u);
+    EXPECT_EQ(nodes[node].time_jumps, 0u);
+    EXPECT_GE(nodes[node].missing, 400u) << "the samples of the outage are not counted missing";
+  }
+  status_reader.reset();
+  orientation_reader.reset();
 }
 
 }  // namespace

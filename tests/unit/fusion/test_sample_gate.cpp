@@ -144,6 +144,40 @@ TEST(SampleGate, AdoptsANewTimeBaseAfterConsistentSamples) {
   EXPECT_EQ(rejected(g, SampleVerdict::kTimeBackward), 4u);
 }
 
+TEST(SampleGate, AnOutageIsAGapNotANewTimeBase) {
+  // 100 Hz, then 5 s of silence (a network cut) during which the node kept counting: the first sample after it
+  // is 500 numbers and 5 s on. That is a gap: accepted, 499 samples missing, no jump and no clock reset.
+  SampleGate g;
+  std::uint64_t seq = 0, t = 1000 * kMs;
+  for (; seq < 100; ++seq, t += 10 * kMs) g.check(seq, at(t));
+  seq += 499;
+  t += 499 * 10 * kMs;
+  EXPECT_EQ(g.check(seq, at(t)), SampleVerdict::kAccepted);
+  EXPECT_EQ(g.check(seq + 1, at(t + 10 * kMs)), SampleVerdict::kAccepted);
+  EXPECT_EQ(g.counters().missing, 499u);
+  EXPECT_EQ(g.counters().clock_resets, 0u);
+  EXPECT_EQ(rejected(g, SampleVerdict::kTimeJump), 0u);
+}
+
+TEST(SampleGate, AJumpTheSequenceDoesNotExplainIsStillAJump) {
+  SampleGate g;
+  std::uint64_t t = 1000 * kMs;
+  for (std::uint64_t k = 0; k < 100; ++k, t += 10 * kMs) g.check(k, at(t));
+  const std::uint64_t last = t - 10 * kMs;
+  EXPECT_EQ(g.check(100, at(last + 5000 * kMs)), SampleVerdict::kTimeJump);  // next number, 5 s later
+  EXPECT_EQ(g.check(110, at(last + 5000 * kMs)), SampleVerdict::kTimeJump);  // 10 numbers, 5 s
+  EXPECT_EQ(g.check(600, at(last + 5200 * kMs)), SampleVerdict::kTimeJump);  // 500 numbers, 5.2 s: 4 % off
+  EXPECT_EQ(g.check(600, at(last + 5050 * kMs)), SampleVerdict::kAccepted);  // 500 numbers, 5.05 s: 1 % off
+  EXPECT_EQ(g.counters().clock_resets, 0u);
+}
+
+TEST(SampleGate, WithoutAKnownPeriodAJumpIsAJump) {
+  // One sample before the silence gives no period: the gap cannot be checked against the numbers.
+  SampleGate g;
+  g.check(0, at(0));
+  EXPECT_EQ(g.check(500, at(5000 * kMs)), SampleVerdict::kTimeJump);
+}
+
 TEST(SampleGate, ScatteredBadTimestampsNeverBecomeATimeBase) {
   SampleGate g;
   std::uint64_t t = 0;
@@ -172,6 +206,9 @@ TEST(SampleGate, RejectsNonsenseParameters) {
   EXPECT_THROW(SampleGate{p}, std::invalid_argument);
   p = {};
   p.rebase_after = 0;
+  EXPECT_THROW(SampleGate{p}, std::invalid_argument);
+  p = {};
+  p.outage_tolerance = std::nan("");
   EXPECT_THROW(SampleGate{p}, std::invalid_argument);
 }
 

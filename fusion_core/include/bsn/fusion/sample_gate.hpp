@@ -49,6 +49,13 @@ class SampleGate {
     /// a longer step (a node that renumbered, a forged seq) restarts the count instead. Accepted samples are at
     /// most max_forward_jump_s apart, so this is the loss of 1 s at 100 kHz. Default 100000.
     std::uint64_t max_sequence_gap = 100'000;
+    /// A timestamp jump after a silence is an outage (a network cut, a radio dropout), not a new time base,
+    /// when the sequence numbers account for it: |dt - steps * period| <= this fraction of steps * period, with
+    /// the period learned from consecutive samples. The sample is then accepted, the skipped numbers count as
+    /// missing and the filter's own gap rule applies. Sensor clocks drift by ppm and sample jitter is far below
+    /// 2 % of a gap longer than max_forward_jump_s, while a clock reset moves time by an unrelated amount.
+    /// Default 0.02.
+    double outage_tolerance = 0.02;
   };
 
   struct Counters {
@@ -73,6 +80,8 @@ class SampleGate {
   SampleVerdict reject_time(SampleVerdict reason, std::uint64_t seq, std::uint64_t t_ns);
   SampleVerdict reject(SampleVerdict reason, std::uint64_t seq);
   SampleVerdict accept(SampleVerdict verdict, std::uint64_t seq, std::uint64_t t_ns);
+  /// True if a sample far ahead in time is explained by the samples its sequence number says were lost.
+  bool explained_by_lost_samples(std::uint64_t seq, std::uint64_t t_ns) const;
 
   Params params_;
   std::uint64_t max_jump_ns_;
@@ -87,6 +96,7 @@ class SampleGate {
   // Steps are taken modulo 2^64: a wrap from 2^64 - 1 to 0 is one step.
   std::uint64_t next_seq_ = 0;            ///< the sequence number expected after the last accepted sample
   std::uint64_t rejected_in_window_ = 0;  ///< rejected since the last accepted sample with a plausible seq ahead
+  double period_ns_ = 0.0;                ///< sample period from consecutive accepted samples (0: not yet known)
   int candidate_count_ = 0;               ///< consecutive samples on a candidate new time base
   std::uint64_t candidate_ns_ = 0;
 };
