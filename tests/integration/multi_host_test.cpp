@@ -330,6 +330,9 @@ TEST_F(MultiHost, LinkCutIsAGapNotAClockReset) {
       3s))
       << "segments back after the link returned: " << back_at.size();
   std::this_thread::sleep_for(1500ms);  // a status period after the return
+  // Readers first: a callback may be waiting for `mutex` while holding the reader's callback lock.
+  status_reader.reset();
+  orientation_reader.reset();
   std::lock_guard lock(mutex);
   for (const std::string& node : kNodes) {
     SCOPED_TRACE(node);
@@ -341,8 +344,6 @@ TEST_F(MultiHost, LinkCutIsAGapNotAClockReset) {
     EXPECT_EQ(nodes[node].time_jumps, 0u);
     EXPECT_GE(nodes[node].missing, 400u) << "the samples of the outage are not counted missing";
   }
-  status_reader.reset();
-  orientation_reader.reset();
 }
 
 }  // namespace
