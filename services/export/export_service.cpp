@@ -203,8 +203,12 @@ int export_broad(const io::SessionReader& r, const fs::path& out) {
       }
       if (i > 0) dts.push_back(ts[i] - ts[i - 1]);
     }
+    // The nominal rate for tools that read BROAD; the samples' own times go along, so gaps and rate changes stay.
+    rec.timestamp_ns.assign(ts.begin(), ts.begin() + static_cast<long>(n));
     std::nth_element(dts.begin(), dts.begin() + static_cast<long>(dts.size() / 2), dts.end());
-    rec.sampling_rate_hz = 1e9 / static_cast<double>(dts[dts.size() / 2]);
+    const std::uint64_t median_dt = dts[dts.size() / 2];
+    if (median_dt == 0) throw io::IoError(r.path() + ": stream '" + s.group + "' has no time between samples");
+    rec.sampling_rate_hz = 1e9 / static_cast<double>(median_dt);
     const std::string segment = segment_of.count(s.key) ? segment_of.at(s.key) : s.key;
     io::write_broad_hdf5((out / (segment + ".hdf5")).string(), rec);
     ++files;

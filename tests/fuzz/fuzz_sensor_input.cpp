@@ -74,9 +74,9 @@ void fuzz_iio(std::span<const std::uint8_t> bytes) {
     const std::string_view one = types.substr(0, semi);
     std::string error;
     if (const auto type = bsn::io::parse_iio_channel_type(one, &error)) {
-      BSN_FUZZ_CHECK(type->storage_bits == 8 || type->storage_bits == 16 || type->storage_bits == 32 ||
-                         type->storage_bits == 64,
-                     "a storage size the kernel never uses was accepted");
+      BSN_FUZZ_CHECK(
+          type->storage_bits == 8 || type->storage_bits == 16 || type->storage_bits == 32 || type->storage_bits == 64,
+          "a storage size the kernel never uses was accepted");
       BSN_FUZZ_CHECK(type->bits >= 1 && type->bits <= type->storage_bits, "significant bits beyond the storage");
       BSN_FUZZ_CHECK(type->shift >= 0 && type->shift < type->storage_bits, "a shift beyond the storage");
       BSN_FUZZ_CHECK(type->repeat >= 1, "a repeat below one");

@@ -113,6 +113,11 @@ TEST_F(Export, CsvAndBroadFromOneSession) {
   EXPECT_EQ(rec.size(), raw.size() - 1);
   EXPECT_EQ(static_cast<std::size_t>(rec.opt_quat.rows()), rec.size());
   EXPECT_NEAR(rec.sampling_rate_hz, 100.0, 0.5);
+  // Each sample keeps its own time: the CSV's timestamp column, row for row.
+  ASSERT_EQ(rec.timestamp_ns.size(), rec.size());
+  for (std::size_t i = 1; i < raw.size(); ++i) {
+    ASSERT_EQ(std::to_string(rec.timestamp_ns[i - 1]), split(raw[i], ',')[2]) << "row " << i;
+  }
   spawn("eval", {"eval", broad, "--filter", "seel_ruppin", "--json"});
   ASSERT_EQ(exit_code(child("eval").wait_for(60s)), 0) << read_file(log_path("eval"));
   EXPECT_NE(read_file(log_path("eval")).find("\"trial\": \"imu\""), std::string::npos) << read_file(log_path("eval"));

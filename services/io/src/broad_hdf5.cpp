@@ -45,6 +45,21 @@ std::vector<std::uint8_t> read_flags(hid_t file, const std::string& path, const 
   return {raw.begin(), raw.end()};
 }
 
+std::vector<std::uint64_t> read_times(hid_t file, const std::string& path, const char* name) {
+  Handle ds(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
+  if (!ds.ok()) throw IoError(path + ": cannot open dataset '" + name + "'");
+  Handle space(H5Dget_space(ds.get()), H5Sclose);
+  hsize_t n = 0;
+  if (H5Sget_simple_extent_ndims(space.get()) != 1 || H5Sget_simple_extent_dims(space.get(), &n, nullptr) < 0) {
+    throw IoError(path + ": dataset '" + name + "' must be one-dimensional");
+  }
+  std::vector<std::uint64_t> t(n);
+  if (n > 0 && H5Dread(ds.get(), H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, t.data()) < 0) {
+    throw IoError(path + ": cannot read dataset '" + name + "'");
+  }
+  return t;
+}
+
 using hdf5::untimed_dataset_properties;
 
 template <class Matrix>
@@ -74,6 +89,7 @@ Recording read_broad_hdf5(const std::string& path) {
   if (has_dataset(file.get(), "opt_quat")) rec.opt_quat = read_matrix<RowsX4>(file.get(), path, "opt_quat", 4);
   if (has_dataset(file.get(), "opt_pos")) rec.opt_pos = read_matrix<RowsX3>(file.get(), path, "opt_pos", 3);
   if (has_dataset(file.get(), "movement")) rec.movement = read_flags(file.get(), path, "movement");
+  if (has_dataset(file.get(), "timestamp_ns")) rec.timestamp_ns = read_times(file.get(), path, "timestamp_ns");
   if (H5Aexists(file.get(), "sampling_rate") <= 0) throw IoError(path + ": missing attribute 'sampling_rate'");
   Handle attr(H5Aopen(file.get(), "sampling_rate", H5P_DEFAULT), H5Aclose);
   if (!attr.ok() || H5Aread(attr.get(), H5T_NATIVE_DOUBLE, &rec.sampling_rate_hz) < 0) {
@@ -108,6 +124,18 @@ void write_broad_hdf5(const std::string& path, const Recording& rec) {
     // HDF5 converts no integer to an enum, so the memory type is the enum itself (int8 = the values in v).
     if (!ds.ok() || H5Dwrite(ds.get(), type.get(), H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) < 0) {
       throw IoError(path + ": cannot write dataset 'movement'");
+    }
+  }
+  if (!rec.timestamp_ns.empty()) {
+    // bsn's addition to the layout: each sample's own time, so a session with gaps or a changing rate exports
+    // as it was recorded (tools that read BROAD ignore the extra dataset and use sampling_rate).
+    const hsize_t n = rec.timestamp_ns.size();
+    Handle space(H5Screate_simple(1, &n, nullptr), H5Sclose);
+    const Handle dcpl(untimed_dataset_properties(), H5Pclose);
+    Handle ds(H5Dcreate2(file.get(), "timestamp_ns", H5T_STD_U64LE, space.get(), H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
+              H5Dclose);
+    if (!ds.ok() || H5Dwrite(ds.get(), H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, rec.timestamp_ns.data()) < 0) {
+      throw IoError(path + ": cannot write dataset 'timestamp_ns'");
     }
   }
   Handle scalar(H5Screate(H5S_SCALAR), H5Sclose);

@@ -56,6 +56,20 @@ TEST(BroadHdf5, RoundTripIsExact) {
   EXPECT_EQ(back.opt_pos.rows(), 0);
 }
 
+// A session with a gap and a rate change exports with each sample's time, and eval then takes dt from it.
+TEST(BroadHdf5, EachSampleTimeRoundTripsWhenGiven) {
+  TempDir dir;
+  Recording r = small_recording();
+  r.timestamp_ns = {1'000'000'000u, 1'010'000'000u, 1'020'000'000u, 1'520'000'000u, 1'521'000'000u};
+  write_broad_hdf5(dir.file("t.hdf5"), r);
+  const Recording back = read_broad_hdf5(dir.file("t.hdf5"));
+  EXPECT_EQ(back.timestamp_ns, r.timestamp_ns);
+  EXPECT_EQ(back.sample(3).timestamp_ns, 1'520'000'000u);
+  // Without times the file has no such dataset and reads back uniform.
+  write_broad_hdf5(dir.file("u.hdf5"), small_recording());
+  EXPECT_TRUE(read_broad_hdf5(dir.file("u.hdf5")).timestamp_ns.empty());
+}
+
 // The same recording written twice gives the same bytes (no modification times in the file), so simulator and
 // recorder outputs can be compared with cmp. HDF5 stores times in whole seconds: the writes are > 1 s apart.
 TEST(BroadHdf5, SameRecordingSameBytes) {

@@ -41,7 +41,7 @@ struct Recording {
 };
 
 /// Reads a BROAD-layout HDF5 file (imu_gyr, imu_acc, imu_mag, optional opt_quat, opt_pos, movement, attribute
-/// sampling_rate).
+/// sampling_rate), and bsn's optional timestamp_ns (uint64 per sample, written by `bsn export --format broad`).
 Recording read_broad_hdf5(const std::string& path);
 
 /// Writes a recording in the BROAD layout; optional parts that are empty are left out.
