@@ -46,8 +46,6 @@ class EvalCommand : public ProcessTest {
   }
 };
 
-int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXITSTATUS(*st) : -1; }
-
 TEST_F(EvalCommand, FolderToJsonAndPlot) {
   write_trial("walk_a", 1);
   write_trial("walk_b", 2);

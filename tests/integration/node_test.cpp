@@ -26,8 +26,6 @@ namespace {
 using namespace std::chrono_literals;
 using SampleInfo = eprosima::fastdds::dds::SampleInfo;
 
-int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXITSTATUS(*st) : -1; }
-
 // What a subscriber sees of one node: its raw samples and its latest status.
 struct Seen {
   std::mutex m;

@@ -77,6 +77,8 @@ bool exited_cleanly(const std::optional<int>& status) {
   return status && WIFEXITED(*status) && WEXITSTATUS(*status) == 0;
 }
 
+int exit_code(const std::optional<int>& status) { return status && WIFEXITED(*status) ? WEXITSTATUS(*status) : -1; }
+
 std::set<std::string> directory_entries(const std::filesystem::path& dir) {
   std::set<std::string> names;
   std::error_code ec;

@@ -47,6 +47,9 @@ std::string describe_status(const std::optional<int>& status);
 /// True if the waitpid status is a normal exit with code 0.
 bool exited_cleanly(const std::optional<int>& status);
 
+/// The exit code of a waitpid status, or -1 if the process did not exit normally (a signal, still running).
+int exit_code(const std::optional<int>& status);
+
 /// Names of the entries of a directory (empty if it does not exist).
 std::set<std::string> directory_entries(const std::filesystem::path& dir);
 

@@ -19,8 +19,6 @@ namespace {
 
 using namespace std::chrono_literals;
 
-int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXITSTATUS(*st) : -1; }
-
 constexpr const char* kTwoSegmentBody = R"(name: pair
 segments:
   - name: pelvis

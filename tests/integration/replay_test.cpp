@@ -23,8 +23,6 @@ namespace {
 using namespace std::chrono_literals;
 using SampleInfo = eprosima::fastdds::dds::SampleInfo;
 
-int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXITSTATUS(*st) : -1; }
-
 struct RawTrack {
   std::vector<std::uint64_t> ts, seq;
   std::vector<double> acc, gyr, mag;
