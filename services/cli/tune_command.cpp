@@ -179,15 +179,16 @@ int run_tune(const TuneOptions& opt) {
     std::string label;
     std::vector<eval::TuneRecording> recs;  ///< with the class's mask
     std::size_t holdout = 0;
+    std::string note;  ///< printed with the set's results
   };
   std::vector<Job> jobs;
   if (!opt.by_intensity) {
-    jobs.push_back({"", std::move(recordings), opt.holdout});
+    jobs.push_back({"", std::move(recordings), opt.holdout, ""});
   } else {
     std::vector<std::vector<std::uint8_t>> classes;
     for (const auto& t : recordings) classes.push_back(eval::intensity_classes(t.rec));
     for (int c = 0; c < 4; ++c) {
-      Job job{eval::intensity_name(c), {}, 0};
+      Job job{eval::intensity_name(c), {}, 0, ""};
       std::size_t skipped = 0;
       for (std::size_t i = 0; i < recordings.size(); ++i) {
         eval::TuneRecording t{recordings[i].name, recordings[i].rec, {}};
@@ -212,8 +213,8 @@ int run_tune(const TuneOptions& opt) {
         continue;
       }
       if (skipped > 0) {
-        std::printf("\nintensity %s: %zu recording(s) with less than %.0f s of it left out\n", job.label.c_str(),
-                    skipped, kMinClassSeconds);
+        job.note =
+            std::to_string(skipped) + " recording(s) with less than " + fmt(kMinClassSeconds) + " s of it left out\n";
       }
       jobs.push_back(std::move(job));
     }
@@ -240,7 +241,7 @@ int run_tune(const TuneOptions& opt) {
     }
     bar.finish();
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    std::printf("\n%s%s", job.label.empty() ? "" : ("intensity " + job.label + ":\n").c_str(),
+    std::printf("\n%s%s%s", job.label.empty() ? "" : ("intensity " + job.label + ":\n").c_str(), job.note.c_str(),
                 report(setup, r, seconds).c_str());
     std::string one = json_of(setup, r, seconds);
     if (!job.label.empty()) one.insert(1, "\"intensity\": " + io::json_string(job.label) + ", ");
