@@ -101,5 +101,27 @@ TEST_F(TuneCommand, BadInputNamesTheFileOrTheParameter) {
   }
 }
 
+// tune's starting point: `bsn calibrate --allan` on the simulator's 30-minute static recording with a 50 Hz
+// magnetometer analyses the magnetometer at its own rate (it was "skipped" and recommended sigma_m = 0 before).
+TEST_F(TuneCommand, AllanAnalysesA50HzMagnetometerAndNeverRecommendsZero) {
+  const std::string out_dir = (dir() / "still").string();
+  ASSERT_EQ(exit_code(run("sim", {"sim", "--scenario", std::string(BSN_SCENARIO_DIR) + "/allan_static_30min.yaml",
+                                  "--out", out_dir})),
+            0)
+      << read_file(log_path("sim"));
+  const std::string svg = (dir() / "allan.svg").string();
+  ASSERT_EQ(exit_code(run("allan", {"calibrate", "--allan", out_dir + "/imu.hdf5", "--plot", svg})), 0)
+      << read_file(log_path("allan"));
+  const std::string out = read_file(log_path("allan"));
+  EXPECT_NE(out.find("mag_x  uT              50"), std::string::npos) << out;
+  EXPECT_EQ(out.find("skipped"), std::string::npos) << out;
+  EXPECT_EQ(out.find("sigma_m 0 "), std::string::npos) << out;
+  EXPECT_NE(out.find("sigma_m 0."), std::string::npos) << out;  // a positive figure below 1 uT
+  const std::string image = read_file(svg);
+  EXPECT_NE(image.find("Allan deviation (uT)"), std::string::npos);
+  EXPECT_NE(image.find("Allan deviation (rad/s)"), std::string::npos);
+  EXPECT_NE(image.find("<circle"), std::string::npos);  // where N was read
+}
+
 }  // namespace
 }  // namespace bsn::integration
