@@ -101,6 +101,37 @@ TEST_F(TuneCommand, BadInputNamesTheFileOrTheParameter) {
   }
 }
 
+// --by-intensity: 15 s at rest, then the swing; the rest is Nez's static class, which gets its own set.
+TEST_F(TuneCommand, ByIntensityIdentifiesTheStaticClassOnItsOwn) {
+  const io::Recording swing = trial(5);
+  const Eigen::Index rest = 1500, n = rest + swing.gyr.rows();
+  io::Recording rec;
+  rec.sampling_rate_hz = 100.0;
+  rec.gyr.resize(n, 3);
+  rec.acc.resize(n, 3);
+  rec.mag.resize(n, 3);
+  rec.opt_quat.resize(n, 4);
+  const fusion::Quat q0(swing.opt_quat(0, 0), swing.opt_quat(0, 1), swing.opt_quat(0, 2), swing.opt_quat(0, 3));
+  for (Eigen::Index i = 0; i < rest; ++i) {  // exact readings at the swing's first orientation
+    rec.gyr.row(i).setZero();
+    rec.acc.row(i) = (q0.conjugate() * fusion::Vec3(0, 0, fusion::kGravity)).transpose();
+    rec.mag.row(i) = swing.mag.row(0);
+    rec.opt_quat.row(i) = swing.opt_quat.row(0);
+  }
+  rec.gyr.bottomRows(swing.gyr.rows()) = swing.gyr;
+  rec.acc.bottomRows(swing.gyr.rows()) = swing.acc;
+  rec.mag.bottomRows(swing.gyr.rows()) = swing.mag;
+  rec.opt_quat.bottomRows(swing.gyr.rows()) = swing.opt_quat;
+  const std::string path = write("rest_then_swing", rec);
+  const std::string json = (dir() / "classes.json").string();
+  const auto st = run("classes", {"tune", "--filter", "mekf", path, "--by-intensity", "--param", "sigma_g=1e-3:1:log",
+                                  "--max-evaluations", "12", "--global-points", "4", "--json", json});
+  ASSERT_EQ(exit_code(st), 0) << read_file(log_path("classes"));
+  const std::string out = read_file(log_path("classes"));
+  EXPECT_NE(out.find("intensity static:\nfilter: {name: mekf, sigma_g: "), std::string::npos) << out;
+  EXPECT_NE(read_file(json).find("{\"intensity\": \"static\", \"filter\": \"mekf\""), std::string::npos);
+}
+
 // tune's starting point: `bsn calibrate --allan` on the simulator's 30-minute static recording with a 50 Hz
 // magnetometer analyses the magnetometer at its own rate (it was "skipped" and recommended sigma_m = 0 before).
 TEST_F(TuneCommand, AllanAnalysesA50HzMagnetometerAndNeverRecommendsZero) {
