@@ -41,6 +41,31 @@ std::vector<AllanPoint> allan_deviation(const Eigen::Ref<const Eigen::VectorXd>&
   return curve;
 }
 
+OwnRateSeries own_rate_series(const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>& xyz,
+                              std::span<const std::uint64_t> t_ns) {
+  OwnRateSeries out;
+  const auto n = static_cast<std::size_t>(std::min<Eigen::Index>(xyz.rows(), static_cast<Eigen::Index>(t_ns.size())));
+  std::vector<Eigen::Index> rows;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (xyz.row(static_cast<Eigen::Index>(i)).allFinite()) rows.push_back(static_cast<Eigen::Index>(i));
+  }
+  out.xyz.resize(static_cast<Eigen::Index>(rows.size()), 3);
+  for (std::size_t k = 0; k < rows.size(); ++k) out.xyz.row(static_cast<Eigen::Index>(k)) = xyz.row(rows[k]);
+  if (rows.size() < 3) return out;
+  std::vector<double> dt;
+  for (std::size_t k = 1; k < rows.size(); ++k) {
+    const auto a = t_ns[static_cast<std::size_t>(rows[k - 1])], b = t_ns[static_cast<std::size_t>(rows[k])];
+    dt.push_back(b > a ? static_cast<double>(b - a) * 1e-9 : 0.0);
+  }
+  std::vector<double> sorted = dt;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2), sorted.end());
+  const double median = sorted[sorted.size() / 2];
+  if (!(median > 0.0)) return out;
+  out.rate_hz = 1.0 / median;
+  for (const double d : dt) out.gaps += d > 1.5 * median;
+  return out;
+}
+
 NoiseCoefficients fit_noise_coefficients(const std::vector<AllanPoint>& curve) {
   NoiseCoefficients out{0.0, 0.0, 0.0};
   std::vector<AllanPoint> points;

@@ -1,5 +1,3 @@
-#include <unistd.h>
-
 #include <algorithm>
 #include <cstdio>
 #include <filesystem>
@@ -10,6 +8,7 @@
 #include "bsn/eval/evaluation.hpp"
 #include "bsn/eval/standard_tests.hpp"
 #include "bsn/io/recording.hpp"
+#include "progress_bar.hpp"
 #include "tools.hpp"
 
 namespace bsn::services {
@@ -25,53 +24,6 @@ struct EvalOptions {
 };
 
 namespace fs = std::filesystem;
-
-bool is_recording(const fs::path& p) {
-  return p.extension() == ".hdf5" || p.extension() == ".h5" || p.extension() == ".csv";
-}
-
-// Files named on the command line, and the recordings inside folders named there (sorted).
-std::vector<fs::path> expand_inputs(const std::vector<std::string>& inputs) {
-  std::vector<fs::path> files;
-  for (const auto& in : inputs) {
-    const fs::path p(in);
-    if (fs::is_directory(p)) {
-      std::vector<fs::path> inside;
-      for (const auto& e : fs::directory_iterator(p)) {
-        if (e.is_regular_file() && is_recording(e.path())) inside.push_back(e.path());
-      }
-      std::sort(inside.begin(), inside.end());
-      if (inside.empty()) throw std::runtime_error(in + ": no .hdf5 or .csv recordings in this folder");
-      files.insert(files.end(), inside.begin(), inside.end());
-    } else if (fs::exists(p)) {
-      files.push_back(p);
-    } else {
-      throw std::runtime_error(in + ": no such file or folder");
-    }
-  }
-  return files;
-}
-
-// A one-line progress bar on stderr, only when stderr is a terminal.
-class ProgressBar {
- public:
-  explicit ProgressBar(std::size_t total) : total_(total), enabled_(isatty(STDERR_FILENO) != 0) {}
-  void show(std::size_t done, const std::string& what) const {
-    if (!enabled_) return;
-    constexpr int kWidth = 30;
-    const int filled = static_cast<int>(kWidth * done / std::max<std::size_t>(1, total_));
-    std::fprintf(stderr, "\r[%.*s%*s] %zu/%zu %-50.50s", filled, "##############################", kWidth - filled, "",
-                 done, total_, what.c_str());
-    std::fflush(stderr);
-  }
-  void finish() const {
-    if (enabled_) std::fprintf(stderr, "\r%*s\r", 100, "");
-  }
-
- private:
-  std::size_t total_;
-  bool enabled_;
-};
 
 int run_eval(const EvalOptions& opt) {
   std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
@@ -134,7 +86,7 @@ int run_eval(const EvalOptions& opt) {
 
   std::vector<fs::path> files;
   try {
-    files = expand_inputs(opt.inputs);
+    files = expand_recording_inputs(opt.inputs);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
     return 2;
@@ -186,6 +138,31 @@ int run_eval(const EvalOptions& opt) {
 }
 
 }  // namespace
+
+bool is_recording_file(const fs::path& p) {
+  return p.extension() == ".hdf5" || p.extension() == ".h5" || p.extension() == ".csv";
+}
+
+std::vector<fs::path> expand_recording_inputs(const std::vector<std::string>& inputs) {
+  std::vector<fs::path> files;
+  for (const auto& in : inputs) {
+    const fs::path p(in);
+    if (fs::is_directory(p)) {
+      std::vector<fs::path> inside;
+      for (const auto& e : fs::directory_iterator(p)) {
+        if (e.is_regular_file() && is_recording_file(e.path())) inside.push_back(e.path());
+      }
+      std::sort(inside.begin(), inside.end());
+      if (inside.empty()) throw std::runtime_error(in + ": no .hdf5 or .csv recordings in this folder");
+      files.insert(files.end(), inside.begin(), inside.end());
+    } else if (fs::exists(p)) {
+      files.push_back(p);
+    } else {
+      throw std::runtime_error(in + ": no such file or folder");
+    }
+  }
+  return files;
+}
 
 Command eval_command() {
   return {"eval", "Score filters against the reference of recordings (BROAD HDF5, CSV)", [](CLI::App* cmd) {

@@ -14,6 +14,6 @@ int main(int argc, char** argv) {
   using namespace bsn::services;
   const Command commands[] = {bsn::sim::sim_command(), fusion_command(),    echo_command(),        demo_command(),
                               eval_command(),          calibrate_command(), calibration_command(), record_command(),
-                              replay_command(),        export_command(),    node_command()};
+                              replay_command(),        export_command(),    node_command(),        tune_command()};
   return run_cli(argc, argv, commands);
 }

@@ -49,6 +49,7 @@ const std::vector<Expectation>& expectations() {
       {"nez_slow", "imu", {1, 300, 611}, {}},
       {"nez_intermediate", "imu", {1, 300, 611}, {}},
       {"nez_fast", "imu", {1, 300, 611}, {}},
+      {"allan_static_30min", "imu", {1, 900, 1799}, {}},
       {"gait_lower_body", "foot_l", {5, 40}, {21, 23}},
       {"gait_lower_body", "thigh_l", {5, 21, 23}, {}},
       {"reach_upper_body", "hand_r", {}, {1, 30}},
@@ -74,7 +75,7 @@ TEST(SimScenarios, EveryShippedScenarioLoadsAndIsChecked) {
     EXPECT_NO_THROW(ScenarioRunner(spec, {}, false)) << stem;
     EXPECT_TRUE(checked.count(stem)) << stem << " has no disturbance expectations in this test";
   }
-  EXPECT_EQ(files, 14);
+  EXPECT_EQ(files, 15);
 }
 
 TEST(SimScenarios, DisturbancesShowWhereTheScenarioPutsThem) {

@@ -5,6 +5,8 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <cstdint>
+#include <span>
 #include <vector>
 
 namespace bsn::calib {
@@ -20,6 +22,17 @@ struct AllanPoint {
 /// non-finite value, or sample_rate_hz is not positive.
 std::vector<AllanPoint> allan_deviation(const Eigen::Ref<const Eigen::VectorXd>& x, double sample_rate_hz,
                                         int points_per_decade = 10);
+
+/// One sensor channel on its own clock: a magnetometer sampled at 50 Hz beside a 100 Hz IMU has a NaN row in the
+/// recording wherever it gave no sample.
+struct OwnRateSeries {
+  Eigen::Matrix<double, Eigen::Dynamic, 3> xyz;  ///< the rows where all three axes are finite, in order
+  double rate_hz = 0.0;  ///< 1 / the median interval between their timestamps; 0 with fewer than 3 rows
+  std::size_t gaps = 0;  ///< intervals longer than 1.5 median intervals (a lost sample; Allan assumes none)
+};
+/// Picks a channel's own samples out of `xyz` (N x 3) with their timestamps `t_ns` (N, increasing).
+OwnRateSeries own_rate_series(const Eigen::Ref<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>>& xyz,
+                              std::span<const std::uint64_t> t_ns);
 
 struct NoiseCoefficients {
   double white_density;     ///< N: angle/velocity random walk, unit/sqrt(Hz) (e.g. rad/s/sqrt(Hz)), read at
