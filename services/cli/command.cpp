@@ -54,13 +54,15 @@ void print_usage_error(CLI::App& app, const CLI::ParseError& error, std::span<co
 
 }  // namespace
 
-int run_cli(int argc, char** argv, std::span<const Command> commands) {
+int run_cli(int argc, char** argv, std::span<const Command> commands,
+            const std::function<std::string(const std::string&)>& footer) {
   CLI::App app{"bsn: inertial motion tracking on a body sensor network over DDS"};
   app.set_version_flag("--version", "bsn 0.1.0");
   app.require_subcommand(1);
   std::vector<std::pair<CLI::App*, std::function<int()>>> runs;
   for (const Command& c : commands) {
     CLI::App* sub = app.add_subcommand(c.name, c.description);
+    if (footer) sub->footer(footer(c.name));
     runs.emplace_back(sub, c.add_options(sub));
   }
   try {

@@ -24,10 +24,15 @@ struct Command {
   std::function<std::function<int()>(CLI::App*)> add_options;
 };
 
+/// The examples and choices of command `name` for its --help (empty if the table has none).
+std::string command_examples(const std::string& name);
+
 /// Parses the command line and runs the chosen command. A usage error prints CLI11's message (for a mistyped
 /// command or option with "did you mean ...?") and returns 2; an exception from the command prints it and
 /// returns 1.
-int run_cli(int argc, char** argv, std::span<const Command> commands);
+/// `footer(name)`, when given, ends each command's --help (its examples and choices: command_examples).
+int run_cli(int argc, char** argv, std::span<const Command> commands,
+            const std::function<std::string(const std::string&)>& footer = {});
 
 /// Parse-time check of a numeric option: a finite number in [min, max], or in (min, max] with `min_exclusive`.
 /// A value outside is a usage error (exit 2) whose message names the option, e.g.

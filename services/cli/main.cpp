@@ -15,5 +15,5 @@ int main(int argc, char** argv) {
   const Command commands[] = {bsn::sim::sim_command(), fusion_command(),    echo_command(),        demo_command(),
                               eval_command(),          calibrate_command(), calibration_command(), record_command(),
                               replay_command(),        export_command(),    node_command(),        tune_command()};
-  return run_cli(argc, argv, commands);
+  return run_cli(argc, argv, commands, command_examples);
 }

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -114,6 +115,33 @@ TEST_F(CliUsage, HelpListsEveryCommandAndExitsZero) {
   EXPECT_EQ(run("help", {"--help"}), 0);
   for (const char* command : {"sim", "fusion", "echo", "demo", "eval", "calibrate"})
     EXPECT_NE(output("help").find(command), std::string::npos) << command << " missing from:\n" << output("help");
+}
+
+// Every command `bsn --help` lists ends its own --help with examples (and the choices where there are any).
+TEST_F(CliUsage, EveryCommandsHelpHasExamples) {
+  ASSERT_EQ(run("help", {"--help"}), 0);
+  const std::string help = output("help");
+  const std::size_t list = help.find("Subcommands:");
+  ASSERT_NE(list, std::string::npos) << help;
+  std::vector<std::string> commands;
+  std::istringstream lines(help.substr(list));
+  std::string line;
+  std::getline(lines, line);
+  while (std::getline(lines, line)) {
+    std::istringstream words(line);
+    std::string name;
+    if (words >> name) commands.push_back(name);
+  }
+  ASSERT_GE(commands.size(), 12u) << help;
+  for (const std::string& c : commands) {
+    EXPECT_EQ(run("help_" + c, {c, "--help"}), 0) << c;
+    const std::string text = output("help_" + c);
+    const std::size_t at = text.find("Examples:\n  bsn ");
+    EXPECT_NE(at, std::string::npos) << "bsn " << c << " --help has no examples:\n" << text;
+  }
+  EXPECT_NE(output("help_eval").find("Filters: all, "), std::string::npos) << output("help_eval");
+  EXPECT_NE(output("help_eval").find("t_s or t_ns"), std::string::npos) << output("help_eval");
+  EXPECT_NE(output("help_fusion").find("the default body: pelvis"), std::string::npos) << output("help_fusion");
 }
 
 }  // namespace
