@@ -149,7 +149,11 @@ std::vector<ScriptedRotation> random_pose_sequence(int count, double hold_s, dou
   std::vector<ScriptedRotation> out;
   double t = start_s + hold_s;  // the first pose is the start pose
   for (int k = 1; k < count; ++k) {
-    Vec3 axis(normal(rng), normal(rng), normal(rng));
+    // Sequenced draws (z, y, x, as GCC evaluated the arguments before): the same seed, the same poses, any compiler.
+    const double z = normal(rng);
+    const double y = normal(rng);
+    const double x = normal(rng);
+    Vec3 axis(x, y, z);
     axis.normalize();
     out.push_back({axis, angle(rng), t, turn_s});
     t += turn_s + hold_s;

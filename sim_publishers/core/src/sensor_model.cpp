@@ -157,7 +157,14 @@ SensorSimulator::SensorSimulator(const SensorErrors& errors, double rate_hz, std
   if (errors_.mag.bias_instability > 0.0) mag_.markov = normal3() * errors_.mag.bias_instability;
 }
 
-Vec3 SensorSimulator::normal3() { return Vec3(normal_(rng_), normal_(rng_), normal_(rng_)); }
+// The draws are sequenced (z, y, x: the order GCC happened to evaluate the constructor's arguments in, so existing
+// recordings stay bit-identical): the order of function arguments is unspecified, and clang's differs.
+Vec3 SensorSimulator::normal3() {
+  const double z = normal_(rng_);
+  const double y = normal_(rng_);
+  const double x = normal_(rng_);
+  return Vec3(x, y, z);
+}
 
 Vec3 SensorSimulator::apply(const ChannelErrors& e, ChannelState& s, const Vec3& u, double t) {
   Vec3 g = s.reading_from_physical * u + e.bias + e.hard_iron + s.random_walk + s.markov;

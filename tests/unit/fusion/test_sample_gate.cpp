@@ -49,7 +49,8 @@ TEST(SampleGate, CountsEachRejectionByReasonAndRecovers) {
   ImuSample huge = next();
   huge.acc.x() = 1e6;
   EXPECT_EQ(g.check(seq, huge), SampleVerdict::kOutOfRange);
-  EXPECT_EQ(g.check(seq, next()), SampleVerdict::kAccepted);  // good sample right after: recovered
+  const ImuSample good = next();  // before the call: the order of a call's arguments is unspecified
+  EXPECT_EQ(g.check(seq, good), SampleVerdict::kAccepted);  // good sample right after: recovered
   const std::uint64_t last_good = t;
   EXPECT_EQ(g.check(seq, at(last_good)), SampleVerdict::kDuplicate);
   EXPECT_EQ(g.check(seq + 1, at(last_good - 500 * kMs)), SampleVerdict::kTimeBackward);
