@@ -279,18 +279,20 @@ function frame(now) {
 }
 
 // One line per joint and segment, for tests and scripts: "J name ts a b c" with the values as the table shows
-// them, and "S name w x y z | w x y z | err" with the solid's and the truth ghost's orientation as drawn.
+// them, and "S name ts w x y z | ts w x y z | err" with the solid's and the truth ghost's orientation as drawn (and
+// the sensor time of the sample each shows).
 view.summary = () => {
   const out = [];
   document.querySelectorAll("#joints tbody tr").forEach(tr => {
     out.push(["J", tr.cells[0].textContent, tr.dataset.ts, tr.cells[2].textContent, tr.cells[3].textContent,
               tr.cells[4].textContent].join(" "));
   });
+  const q = o => [o.quaternion.w, o.quaternion.x, o.quaternion.y, o.quaternion.z].join(" ");
   for (const name in view.segments) {
     const s = view.segments[name];
-    const q = o => o ? [o.quaternion.w, o.quaternion.x, o.quaternion.y, o.quaternion.z].join(" ") : "none";
-    out.push(["S", name, q(s.mesh), "|", q(s.ghost), "|", s.err === null || s.err === undefined ? "none" : s.err]
-                 .join(" "));
+    if (!s.mesh) continue;
+    out.push(["S", name, s.ts, q(s.mesh), "|", s.ghost ? s.truthTs + " " + q(s.ghost) : "none", "|",
+              s.err === undefined ? "none" : s.err].join(" "));
   }
   return out.join("\n");
 };
