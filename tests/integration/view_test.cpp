@@ -223,6 +223,25 @@ const V* at_time(const std::map<std::uint64_t, V>& series, double ts) {
   return it != series.end() && std::abs(static_cast<double>(it->first) - ts) <= 1000.0 ? &it->second : nullptr;
 }
 
+TEST_F(ProcessTest, DemoWithViewPrintsTheUrlOfALiveView) {
+  auto& demo = spawn(
+      "demo", {"demo", "--view", "--view-port", "0", "--duration", "6", "--domain", std::to_string(test_domain(67))});
+  int port = 0;
+  const std::regex url("live 3D view at http://127\\.0\\.0\\.1:([0-9]+)/");
+  ASSERT_TRUE(wait_until(
+      [&] {
+        std::smatch m;
+        const std::string text = read_file(log_path("demo"));
+        if (std::regex_search(text, m, url)) port = std::stoi(m[1]);
+        return port > 0;
+      },
+      20s))
+      << tail(log_path("demo"));
+  EXPECT_NE(http_get(port, "/").find("<title>bsn view</title>"), std::string::npos);
+  const auto status = demo.wait_for(30s);
+  EXPECT_TRUE(exited_cleanly(status)) << describe_status(status) << "\n" << tail(log_path("demo"));
+}
+
 class ViewBrowser : public ProcessTest {};
 
 TEST_F(ViewBrowser, PageShowsTheLiveBodyJointAnglesAndTruth) {
