@@ -18,18 +18,23 @@ struct ViewServer::Client {
   std::atomic<std::uint64_t> dropped{0};
   std::atomic<std::uint64_t> frames_sent{0};
   std::thread sender;
+  std::chrono::nanoseconds gather{0};
 
   void push(std::shared_ptr<const std::string> message, std::size_t max_queue) {
+    bool was_empty = false;
     {
       std::lock_guard lock(mutex);
       if (closing) return;
+      was_empty = queue.empty();
       queue.push_back(std::move(message));
       while (queue.size() > max_queue) {
         queue.pop_front();
         ++dropped;
       }
     }
-    wake.notify_one();
+    // Only the first message of a frame wakes the sender (it then gathers the others): a wake-up per message costs
+    // 20 browsers more than the writes themselves.
+    if (was_empty) wake.notify_one();
   }
 
   // Sends everything queued as one frame (a JSON array), so a browser that is behind catches up in few writes.
@@ -39,7 +44,7 @@ struct ViewServer::Client {
       {
         std::unique_lock lock(mutex);
         wake.wait(lock, [this] { return closing || !queue.empty(); });
-        if (closing) return;
+        if (wake.wait_for(lock, gather, [this] { return closing; })) return;
         frame = "[";
         for (const auto& m : queue) {
           if (frame.size() > 1) frame += ',';
@@ -136,6 +141,7 @@ void ViewServer::on_ws_ready(mg_connection* conn, void* self_ptr) {
   auto* self = static_cast<ViewServer*>(self_ptr);
   auto client = std::make_shared<Client>();
   client->conn = conn;
+  client->gather = std::chrono::nanoseconds(static_cast<std::int64_t>(self->options_.gather_ms * 1e6));
   {
     std::lock_guard lock(self->mutex_);
     // The snapshot is queued under the same lock as broadcasts, so no message falls between the two.

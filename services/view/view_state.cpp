@@ -56,15 +56,20 @@ std::string json_string(std::string_view text) {
 }
 
 double rotation_angle_deg(const std::array<double, 4>& a, const std::array<double, 4>& b) {
-  const double dot = std::abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
-  return 2.0 * std::acos(std::min(1.0, dot)) * kDeg;
+  // The rotation a^* b: its angle from atan2 (acos of the dot product loses digits near 0).
+  const double w = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+  const double x = a[0] * b[1] - a[1] * b[0] - a[2] * b[3] + a[3] * b[2];
+  const double y = a[0] * b[2] + a[1] * b[3] - a[2] * b[0] - a[3] * b[1];
+  const double z = a[0] * b[3] - a[1] * b[2] + a[2] * b[1] - a[3] * b[0];
+  return 2.0 * std::atan2(std::sqrt(x * x + y * y + z * z), std::abs(w)) * kDeg;
 }
 
 bool ViewState::due(Limited& slot, std::uint64_t now_ns) {
   if (now_ns < slot.next_due_ns) return false;
-  // On a fixed grid (not "now + interval"), so a 100 Hz source is passed on at the full 30 Hz; after a pause the
-  // grid restarts at now.
-  slot.next_due_ns = std::max(slot.next_due_ns, now_ns > kIntervalNs ? now_ns - kIntervalNs : 0) + kIntervalNs;
+  // One grid for every segment and joint (multiples of 1/30 s): each passes its first sample after a grid point,
+  // so a 100 Hz source is passed on at the full 30 Hz, and the messages of all segments come in bursts that the
+  // server sends to a browser in one frame.
+  slot.next_due_ns = (now_ns / kIntervalNs + 1) * kIntervalNs;
   return true;
 }
 

@@ -7,8 +7,8 @@
 //   {"k":"t","seg":S,"ts":NS,"q":[w,x,y,z]}                                     truth
 //   {"k":"j","joint":J,"parent":P,"child":C,"axes":A,"ts":NS,"deg":[a,b,c],"flags":F}  joint angles, degrees
 //   {"k":"s","process":P,"nodes":[{"node":N,"seg":S,"rate":HZ,"stale":B,"calib":ID},...]}  status
-// Orientations, truth and joint angles are passed on at most kMaxRateHz per segment (joint), on a fixed grid so that
-// a 100 Hz source gives the full rate.
+// Orientations, truth and joint angles are passed on at most kMaxRateHz per segment (joint), on one fixed grid for
+// all, so that a 100 Hz source gives the full rate and the messages of all segments come together.
 #pragma once
 
 #include <array>
@@ -62,7 +62,7 @@ class ViewState {
     std::uint64_t next_due_ns = 0;
     std::string latest;  ///< the last message sent
   };
-  /// True if a message of `key` may go now; moves its grid on.
+  /// True if a message of this slot may go now; moves it on to the next grid point.
   static bool due(Limited& slot, std::uint64_t now_ns);
 
   std::map<std::string, Limited> orientation_;

@@ -51,6 +51,14 @@ TEST(ViewState, ErrorToTruthOfTheSameSample) {
   EXPECT_NE(none->find("\"err\":null"), std::string::npos) << *none;
 }
 
+TEST(ViewState, RotationAngleIsExactNearZeroAndAtHalfTurns) {
+  const double tiny = 1e-6 / 2;  // 1e-6 rad about x
+  EXPECT_NEAR(rotation_angle_deg({1, 0, 0, 0}, {std::cos(tiny), std::sin(tiny), 0, 0}), 1e-6 * 180 / std::numbers::pi,
+              1e-12);
+  EXPECT_NEAR(rotation_angle_deg({1, 0, 0, 0}, {0, 0, 0, 1}), 180.0, 1e-9);
+  EXPECT_NEAR(rotation_angle_deg({0, 1, 0, 0}, {0, -1, 0, 0}), 0.0, 1e-9);  // q and -q: the same rotation
+}
+
 TEST(ViewState, NonFiniteValuesAreDroppedAndCountedNeverSentAsNaN) {
   ViewState state;
   const double nan = std::numeric_limits<double>::quiet_NaN();
