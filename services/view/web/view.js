@@ -30,7 +30,7 @@ function initScene() {
   scene.background = new THREE.Color(0xdde3ea);
   camera = new THREE.PerspectiveCamera(45, host.clientWidth / host.clientHeight, 0.05, 50);
   camera.up.set(0, 0, 1);  // ENU: z up
-  camera.position.set(2.2, -2.6, 1.6);
+  camera.position.set(1.4, -1.7, 1.2);
   try {
     renderer = new THREE.WebGLRenderer({antialias: true, preserveDrawingBuffer: true});
   } catch (e) {
