@@ -73,39 +73,45 @@ void Ros2Bridge::on_raw(const bsn::RawSample& r) {
 
 void Ros2Bridge::on_orientation(const bsn::Orientation& o) {
   if (!finite(o.quat())) return;
-  std::lock_guard lock(mutex_);
-  auto it = segments_.find(o.segment());
-  if (it == segments_.end()) {
-    if (segments_.size() >= kMaxSegments) return;
-    it = segments_.emplace(o.segment(), Segment{}).first;  // its writer comes at the next tick (main thread)
-  }
-  Segment& s = it->second;
-  s.quat = o.quat();
-  s.fresh = true;
-  if (!s.imu) return;
+  // Written outside the lock: a DDS call under a lock that a DDS callback also takes can deadlock with Fast DDS's
+  // own locks (the callback thread holds its reader's).
   sensor_msgs::msg::dds_::Imu_ imu;
-  imu.header().stamp(now_stamp());
-  imu.header().frame_id(ros2_frame(o.segment()));
-  imu.orientation(ros_quat(o.quat()));
-  // orientation_covariance all 0: "unknown" (sensor_msgs/Imu). Rates and accelerations of the same raw sample;
-  // without it, element 0 of their covariance is -1: "not in this message".
-  imu.angular_velocity_covariance()[0] = -1.0;
-  imu.linear_acceleration_covariance()[0] = -1.0;
-  if (auto r = raw_.find(o.node_id()); r != raw_.end()) {
-    for (const Raw& raw : r->second) {
-      if (raw.timestamp_ns != o.timestamp_ns() || raw.timestamp_ns == 0) continue;
-      if (raw.channels & bsn::CHANNEL_GYR) {
-        imu.angular_velocity(vec(raw.gyr[0], raw.gyr[1], raw.gyr[2]));
-        imu.angular_velocity_covariance()[0] = 0.0;
+  dds::Writer<sensor_msgs::msg::dds_::Imu_>* writer = nullptr;
+  {
+    std::lock_guard lock(mutex_);
+    auto it = segments_.find(o.segment());
+    if (it == segments_.end()) {
+      if (segments_.size() >= kMaxSegments) return;
+      it = segments_.emplace(o.segment(), Segment{}).first;  // its writer comes at the next tick (main thread)
+    }
+    Segment& s = it->second;
+    s.quat = o.quat();
+    s.fresh = true;
+    if (!s.imu) return;
+    writer = s.imu.get();
+    imu.header().stamp(now_stamp());
+    imu.header().frame_id(ros2_frame(o.segment()));
+    imu.orientation(ros_quat(o.quat()));
+    // orientation_covariance all 0: "unknown" (sensor_msgs/Imu). Rates and accelerations of the same raw sample;
+    // without it, element 0 of their covariance is -1: "not in this message".
+    imu.angular_velocity_covariance()[0] = -1.0;
+    imu.linear_acceleration_covariance()[0] = -1.0;
+    if (auto r = raw_.find(o.node_id()); r != raw_.end()) {
+      for (const Raw& raw : r->second) {
+        if (raw.timestamp_ns != o.timestamp_ns() || raw.timestamp_ns == 0) continue;
+        if (raw.channels & bsn::CHANNEL_GYR) {
+          imu.angular_velocity(vec(raw.gyr[0], raw.gyr[1], raw.gyr[2]));
+          imu.angular_velocity_covariance()[0] = 0.0;
+        }
+        if (raw.channels & bsn::CHANNEL_ACC) {
+          imu.linear_acceleration(vec(raw.acc[0], raw.acc[1], raw.acc[2]));
+          imu.linear_acceleration_covariance()[0] = 0.0;
+        }
+        break;
       }
-      if (raw.channels & bsn::CHANNEL_ACC) {
-        imu.linear_acceleration(vec(raw.acc[0], raw.acc[1], raw.acc[2]));
-        imu.linear_acceleration_covariance()[0] = 0.0;
-      }
-      break;
     }
   }
-  if (!s.imu->write(imu)) ++write_failures_;
+  if (!writer->write(imu)) ++write_failures_;
 }
 
 void Ros2Bridge::on_joint(const bsn::JointAngles& j) {
@@ -118,57 +124,71 @@ void Ros2Bridge::on_joint(const bsn::JointAngles& j) {
 }
 
 void Ros2Bridge::tick() {
-  std::lock_guard lock(mutex_);
-  for (auto& [name, s] : segments_) {
-    if (s.imu) continue;
-    s.topic_name = dds::ros2_imu_topic_name(ros2_name(name));
-    s.imu = participant_.make_writer(dds::ros2_imu_topic(s.topic_name));
+  // New segments' writers are made outside the lock (DDS calls under it can deadlock with a DDS callback).
+  std::vector<std::string> new_segments;
+  {
+    std::lock_guard lock(mutex_);
+    for (const auto& [name, s] : segments_)
+      if (!s.imu) new_segments.push_back(name);
   }
-  const auto stamp = now_stamp();
-  bool any_fresh = joints_fresh_;
-  for (const auto& [name, s] : segments_) any_fresh = any_fresh || s.fresh;
-  if (!any_fresh) return;
-
-  // TF: a segment that is some joint's child hangs from its parent by the joint's rotation; the others from world.
-  std::set<std::string> children;
+  for (const std::string& name : new_segments) {
+    Segment made;
+    made.topic_name = dds::ros2_imu_topic_name(ros2_name(name));
+    made.imu = participant_.make_writer(dds::ros2_imu_topic(made.topic_name));
+    std::lock_guard lock(mutex_);
+    Segment& s = segments_[name];
+    s.topic_name = std::move(made.topic_name);  // the writer's topic keeps its own copy of the name
+    s.imu = std::move(made.imu);
+  }
   tf2_msgs::msg::dds_::TFMessage_ tf;
-  for (const auto& [name, j] : joints_) {
-    children.insert(j.child);
-    geometry_msgs::msg::dds_::TransformStamped_ t;
-    t.header().stamp(stamp);
-    t.header().frame_id(ros2_frame(j.parent));
-    t.child_frame_id(ros2_frame(j.child));
-    t.transform().translation(vec(0, 0, -kRos2LinkLength_m));  // the parent's far end, along its -z
-    t.transform().rotation(ros_quat(j.quat));                  // q_parent^* q_child: child frame to parent frame
-    tf.transforms().push_back(std::move(t));
-  }
-  for (auto& [name, s] : segments_) {
-    s.fresh = false;
-    if (!s.quat || children.count(name)) continue;
-    geometry_msgs::msg::dds_::TransformStamped_ t;
-    t.header().stamp(stamp);
-    t.header().frame_id("world");  // ENU, as REP-103 has it
-    t.child_frame_id(ros2_frame(name));
-    t.transform().translation(vec(0, 0, 1.0));  // a root 1 m above the floor
-    t.transform().rotation(ros_quat(*s.quat));
-    tf.transforms().push_back(std::move(t));
-  }
-  if (!tf.transforms().empty() && !tf_writer_->write(tf)) ++write_failures_;
+  sensor_msgs::msg::dds_::JointState_ js;
+  bool joints_due = false;
+  {
+    std::lock_guard lock(mutex_);
+    const auto stamp = now_stamp();
+    bool any_fresh = joints_fresh_;
+    for (const auto& [name, s] : segments_) any_fresh = any_fresh || s.fresh;
+    if (!any_fresh) return;
 
-  if (joints_fresh_) {
-    joints_fresh_ = false;
-    sensor_msgs::msg::dds_::JointState_ js;
-    js.header().stamp(stamp);
+    // TF: a segment that is some joint's child hangs from its parent by the joint's rotation; the others from world.
+    std::set<std::string> children;
     for (const auto& [name, j] : joints_) {
-      for (std::size_t i = 0; i < 3; ++i) {
-        // One ROS joint per angle: "<joint>/<position in the sequence>_<axis>", e.g. knee_l/1_z.
-        const char axis = i < j.axes.size() ? j.axes[i] : '?';
-        js.name().push_back(ros2_name(name) + "/" + std::to_string(i + 1) + "_" + std::string(1, axis));
-        js.position().push_back(j.angles[i]);
+      children.insert(j.child);
+      geometry_msgs::msg::dds_::TransformStamped_ t;
+      t.header().stamp(stamp);
+      t.header().frame_id(ros2_frame(j.parent));
+      t.child_frame_id(ros2_frame(j.child));
+      t.transform().translation(vec(0, 0, -kRos2LinkLength_m));  // the parent's far end, along its -z
+      t.transform().rotation(ros_quat(j.quat));                  // q_parent^* q_child: child frame to parent frame
+      tf.transforms().push_back(std::move(t));
+    }
+    for (auto& [name, s] : segments_) {
+      s.fresh = false;
+      if (!s.quat || children.count(name)) continue;
+      geometry_msgs::msg::dds_::TransformStamped_ t;
+      t.header().stamp(stamp);
+      t.header().frame_id("world");  // ENU, as REP-103 has it
+      t.child_frame_id(ros2_frame(name));
+      t.transform().translation(vec(0, 0, 1.0));  // a root 1 m above the floor
+      t.transform().rotation(ros_quat(*s.quat));
+      tf.transforms().push_back(std::move(t));
+    }
+    if (joints_fresh_) {
+      joints_fresh_ = false;
+      joints_due = true;
+      js.header().stamp(stamp);
+      for (const auto& [name, j] : joints_) {
+        for (std::size_t i = 0; i < 3; ++i) {
+          // One ROS joint per angle: "<joint>/<position in the sequence>_<axis>", e.g. knee_l/1_z.
+          const char axis = i < j.axes.size() ? j.axes[i] : '?';
+          js.name().push_back(ros2_name(name) + "/" + std::to_string(i + 1) + "_" + std::string(1, axis));
+          js.position().push_back(j.angles[i]);
+        }
       }
     }
-    if (!joint_state_writer_->write(js)) ++write_failures_;
   }
+  if (!tf.transforms().empty() && !tf_writer_->write(tf)) ++write_failures_;
+  if (joints_due && !joint_state_writer_->write(js)) ++write_failures_;
 }
 
 namespace {

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -35,7 +36,7 @@ class Ros2Bridge {
   explicit Ros2Bridge(dds::Participant& participant);
   /// Main thread, every few ms: creates the writers of new segments, publishes TF and joint states.
   void tick();
-  std::uint64_t write_failures() const { return write_failures_; }
+  std::uint64_t write_failures() const { return write_failures_.load(); }
 
   static constexpr std::size_t kMaxSegments = 256;  ///< segments and joints mirrored; further ones are ignored
   static constexpr std::size_t kRawHistory = 16;    ///< raw samples kept per node to find an estimate's own
@@ -67,7 +68,7 @@ class Ros2Bridge {
   std::map<std::string, Segment> segments_;
   std::map<std::string, Joint> joints_;
   bool joints_fresh_ = false;
-  std::uint64_t write_failures_ = 0;
+  std::atomic<std::uint64_t> write_failures_{0};  // counted by the DDS callbacks and the tick
   std::unique_ptr<dds::Writer<tf2_msgs::msg::dds_::TFMessage_>> tf_writer_;
   std::unique_ptr<dds::Writer<sensor_msgs::msg::dds_::JointState_>> joint_state_writer_;
   std::unique_ptr<dds::Reader<bsn::RawSample>> raw_reader_;

@@ -142,12 +142,14 @@ void ViewServer::on_ws_ready(mg_connection* conn, void* self_ptr) {
   auto client = std::make_shared<Client>();
   client->conn = conn;
   client->gather = std::chrono::nanoseconds(static_cast<std::int64_t>(self->options_.gather_ms * 1e6));
+  // The snapshot is taken outside mutex_: its provider locks the state, whose owner broadcasts (taking mutex_)
+  // under that lock, so taking it inside would invert the order. A message broadcast between the snapshot and the
+  // registration is lost to this browser only; the next one of its segment comes within 1/30 s.
+  if (self->options_.snapshot)
+    for (auto& m : self->options_.snapshot())
+      client->push(std::make_shared<const std::string>(std::move(m)), self->options_.max_queue);
   {
     std::lock_guard lock(self->mutex_);
-    // The snapshot is queued under the same lock as broadcasts, so no message falls between the two.
-    if (self->options_.snapshot)
-      for (auto& m : self->options_.snapshot())
-        client->push(std::make_shared<const std::string>(std::move(m)), self->options_.max_queue);
     self->clients_[conn] = client;
   }
   client->sender = std::thread([c = client.get()] { c->run(); });

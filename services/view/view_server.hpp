@@ -41,7 +41,9 @@ class ViewServer {
     /// truth and joint angles); one frame per message costs 20 browsers about twice the writes.
     double gather_ms = 2.0;
     std::map<std::string, Asset> assets;  ///< URL path ("/index.html") -> what it serves; "/" serves "/index.html"
-    std::function<std::vector<std::string>()> snapshot;  ///< the first messages of a new browser
+    /// The first messages of a new browser. Called without the server's lock, so it may take locks that are held
+    /// around broadcast().
+    std::function<std::vector<std::string>()> snapshot;
   };
   struct Stats {
     std::size_t clients = 0;

@@ -195,7 +195,10 @@ TEST_F(ProcessTest, Ros2BridgeSamplesDecodeAsRos2MessagesWithBsnsValues) {
 
   // sensor_msgs/Imu: header (stamp: int32 sec, uint32 nanosec; string frame_id), orientation (x, y, z, w),
   // float64[9] orientation_covariance, angular_velocity, float64[9], linear_acceleration, float64[9].
-  int imu_with_rates = 0;
+  // This test's own readers are best effort (as a ROS 2 sensor-data subscription), so on a loaded machine they may
+  // miss a sample that the bridge mirrored: a value must be one of bsn's for most mirrored samples (a wrong mapping
+  // matches none), not for every one.
+  int imu_with_rates = 0, orientation_found = 0, rates_found = 0;
   for (const Bytes& b : imu_seen) {
     Cdr c(b);
     const std::int32_t sec = c.i32();
@@ -211,23 +214,25 @@ TEST_F(ProcessTest, Ros2BridgeSamplesDecodeAsRos2MessagesWithBsnsValues) {
     ASSERT_TRUE(c.at_end()) << "Imu of " << b.size() << " bytes does not have the ROS 2 layout";
     EXPECT_LE(std::abs(sec - now_s), 10) << "stamp is ROS (UNIX) time";
     EXPECT_LT(nanosec, 1'000'000'000u);
-    EXPECT_TRUE(std::any_of(orientations["thigh_l"].begin(), orientations["thigh_l"].end(), [&](const auto& o) {
-      return same(q, o);
-    })) << "orientation not one of bsn/orientation's";
+    orientation_found += std::any_of(orientations["thigh_l"].begin(), orientations["thigh_l"].end(),
+                                     [&](const auto& o) { return same(q, o); });
     for (double v : cov_q) EXPECT_EQ(v, 0.0) << "orientation covariance: all 0 = unknown";
     if (cov_w[0] == 0.0) {
       ++imu_with_rates;
-      EXPECT_TRUE(std::any_of(gyros["thigh_l"].begin(), gyros["thigh_l"].end(), [&](const auto& g) { return g == w; }))
-          << "angular velocity not one of bsn/raw's";
+      rates_found +=
+          std::any_of(gyros["thigh_l"].begin(), gyros["thigh_l"].end(), [&](const auto& g) { return g == w; });
       EXPECT_GT(std::hypot(a[0], a[1], a[2]), 5.0) << "specific force includes gravity";
     } else {
       EXPECT_EQ(cov_w[0], -1.0) << "no rate: element 0 is -1";
     }
   }
   EXPECT_GT(imu_with_rates, 0) << "no Imu carried the raw sample's rates";
+  EXPECT_GE(2 * orientation_found, static_cast<int>(imu_seen.size())) << "orientations equal to bsn/orientation's";
+  EXPECT_GE(2 * rates_found, imu_with_rates) << "angular velocities equal to bsn/raw's";
 
   // tf2_msgs/TFMessage: sequence of TransformStamped (header, child_frame_id, translation xyz, rotation xyzw).
   bool saw_root = false, saw_joint = false;
+  int tf_total = 0, tf_found = 0;
   for (const Bytes& b : tf_seen) {
     Cdr c(b);
     const std::uint32_t n = c.u32();
@@ -238,14 +243,17 @@ TEST_F(ProcessTest, Ros2BridgeSamplesDecodeAsRos2MessagesWithBsnsValues) {
       const std::string child = c.str();
       const auto t = c.vec3();
       const auto q = c.quat_xyzw();
-      if (parent == "world" && child == "bsn/pelvis") {
-        saw_root = true;
-        EXPECT_TRUE(std::any_of(orientations["pelvis"].begin(), orientations["pelvis"].end(),
-                                [&](const auto& o) { return same(q, o); }));
+      ++tf_total;
+      if (parent == "world" && (child == "bsn/pelvis" || child == "bsn/thigh_l")) {
+        // thigh_l hangs from world only until its joint's first angles arrive.
+        const std::string seg = child.substr(4);
+        saw_root = saw_root || seg == "pelvis";
+        tf_found +=
+            std::any_of(orientations[seg].begin(), orientations[seg].end(), [&](const auto& o) { return same(q, o); });
       } else if (parent == "bsn/pelvis" && child == "bsn/thigh_l") {
         saw_joint = true;
-        EXPECT_TRUE(std::any_of(joint_quats["hip_l"].begin(), joint_quats["hip_l"].end(),
-                                [&](const auto& o) { return same(q, o); }));
+        tf_found += std::any_of(joint_quats["hip_l"].begin(), joint_quats["hip_l"].end(),
+                                [&](const auto& o) { return same(q, o); });
         EXPECT_EQ(t[2], -0.4);
       } else {
         ADD_FAILURE() << "unexpected frame " << parent << " -> " << child;
@@ -254,8 +262,10 @@ TEST_F(ProcessTest, Ros2BridgeSamplesDecodeAsRos2MessagesWithBsnsValues) {
     ASSERT_TRUE(c.at_end()) << "TFMessage does not have the ROS 2 layout";
   }
   EXPECT_TRUE(saw_root && saw_joint);
+  EXPECT_GE(2 * tf_found, tf_total) << "rotations equal to bsn's orientations and joint quaternions";
 
   // sensor_msgs/JointState: header, string[] name, float64[] position, velocity, effort.
+  int joints_found = 0;
   for (const Bytes& b : joints_seen) {
     Cdr c(b);
     c.i32();
@@ -272,10 +282,10 @@ TEST_F(ProcessTest, Ros2BridgeSamplesDecodeAsRos2MessagesWithBsnsValues) {
     ASSERT_EQ(position.size(), 3u);
     EXPECT_EQ(names[0].rfind("hip_l/1_", 0), 0u) << names[0];
     const std::array<double, 3> angles{position[0], position[1], position[2]};
-    EXPECT_TRUE(std::any_of(joint_angles["hip_l"].begin(), joint_angles["hip_l"].end(), [&](const auto& a) {
-      return a == angles;
-    })) << "positions are not one of bsn/joint_angles' samples";
+    joints_found += std::any_of(joint_angles["hip_l"].begin(), joint_angles["hip_l"].end(),
+                                [&](const auto& a) { return a == angles; });
   }
+  EXPECT_GE(2 * joints_found, static_cast<int>(joints_seen.size())) << "positions equal to bsn/joint_angles'";
 }
 
 }  // namespace
