@@ -12,6 +12,8 @@ packages=(
   clang-format procps                                # formatting check in CI; ps for diagnostics
   openssl systemd iproute2                           # PKI for DDS-Security, unit-file checks, network namespaces
   clang libclang-rt-14-dev                           # the fuzz targets (libFuzzer, sanitizers) in CI
+  libcivetweb-dev libjs-three libjs-chart.js         # bsn view: HTTP/WebSocket server, 3D and plots (offline)
+  chromium                                           # bsn view's browser test (headless)
 )
 
 missing=()

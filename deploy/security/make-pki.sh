@@ -8,7 +8,8 @@
 #   sensor       publishes bsn/raw (and bsn/truth/orientation, for simulators)
 #   fusion       reads raw, calibration results and status; publishes orientation, joint angles, status
 #   calibration  reads raw and calibration requests; publishes calibration results and progress
-#   viewer       reads orientation, joint angles, status (and the simulator's truth)
+#   viewer       reads orientation, joint angles, status (and the simulator's truth): bsn view
+#   ros2-bridge  reads raw, orientation and joint angles; publishes the ROS 2 mirror (rt/tf, rt/bsn/...)
 #   operator     a calibration client: publishes requests; reads progress, results and status
 #   recorder     reads every bsn topic
 #   tester       publishes raw samples and reads every bsn topic (for tests and benchmarks, not for a lab)
@@ -33,6 +34,7 @@ role_topics() {  # role -> "publish|subscribe", space-separated topic lists
     fusion)      echo "bsn/orientation bsn/joint_angles bsn/status|bsn/raw bsn/calibration/result bsn/status" ;;
     calibration) echo "bsn/calibration/result bsn/calibration/progress bsn/status|bsn/raw bsn/calibration/request" ;;
     viewer)      echo "|bsn/orientation bsn/joint_angles bsn/status bsn/truth/orientation" ;;
+    ros2-bridge) echo "rt/tf rt/bsn/*|bsn/raw bsn/orientation bsn/joint_angles" ;;
     operator)    echo "bsn/calibration/request|bsn/calibration/progress bsn/calibration/result bsn/status" ;;
     recorder)    echo "|bsn/*" ;;
     tester)      echo "bsn/raw bsn/truth/orientation bsn/calibration/request|bsn/*" ;;

@@ -71,6 +71,13 @@ const std::map<std::string, std::string>& examples() {
        "  bsn node --source udp:9000 --node hand_r --map hand_r.map.yaml\n"
        "  bsn node --source iio:iio:device0 --node pelvis\n"
        "Sources: serial:PATH[?baud=N] (line protocol), udp:PORT (lines or NGIMU OSC), iio:DEVICE (Linux IIO)."},
+      {"view",
+       "  bsn view                                   http://127.0.0.1:8080/ on this machine only\n"
+       "  bsn view --bind 0.0.0.0 --port 8081        open to the lab network\n"
+       "  bsn demo --view                            the demo with its view"},
+      {"ros2-bridge",
+       "  bsn ros2-bridge                            rt/bsn/<segment>/imu, rt/tf, rt/bsn/joint_states for ROS 2 tools\n"
+       "  bsn ros2-bridge --domain 0                 ROS 2's default domain (ROS_DOMAIN_ID=0)"},
       {"tune",
        "  bsn sim --scenario sim_publishers/scenarios/nez_slow.yaml --out slow/\n"
        "  bsn tune --filter mekf slow/imu.hdf5 --max-evaluations 60\n"

@@ -32,6 +32,9 @@ struct DemoOptions {
   double rate_hz = 100.0;   ///< sample rate of the simulated nodes
   int domain = 0;
   bool calibrate = false;  ///< the live-calibration demo instead
+  bool view = false;       ///< also start `bsn view` and print its URL
+  int view_port = 8080;
+  std::string view_bind = "127.0.0.1";
 };
 
 using Clock = std::chrono::steady_clock;
@@ -49,13 +52,15 @@ struct DemoView {
   bool have_status = false;
 };
 
-std::string render(DemoView& view, const std::vector<std::string>& joint_order, double elapsed_s, bool tty) {
+std::string render(DemoView& view, const std::vector<std::string>& joint_order, double elapsed_s, bool tty,
+                   const std::string& view_url) {
   std::lock_guard lock(view.mutex);
   std::string out;
   char line[256];
   if (tty) out += "\033[H\033[2J";  // home + clear screen
   std::snprintf(line, sizeof line, "bsn demo  %.1f s  joint angles in degrees (Ctrl-C stops)\n", elapsed_s);
   out += line;
+  if (!view_url.empty()) out += "live 3D view: " + view_url + "\n";
   std::snprintf(line, sizeof line, "%-10s %-18s %4s %9s %9s %9s  %7s  %s\n", "joint", "parent -> child", "axes", "1st",
                 "2nd", "3rd", "samples", "flags");
   out += line;
@@ -200,6 +205,34 @@ int run_demo(const DemoOptions& opt) {
       logging::log_error("cannot start the demo processes: ", e.what());
       exit_code = 1;
     }
+    // --view: `bsn view` as one more process; its first line on stdout is its URL.
+    std::unique_ptr<dds::ChildProcess> view_process;
+    std::string view_url;
+    if (opt.view && exit_code == 0) {
+      const std::string view_log = (dir / "view.log").string();
+      view_process = std::make_unique<dds::ChildProcess>(
+          std::vector<std::string>{self, "view", "--domain", domain, "--port", std::to_string(opt.view_port), "--bind",
+                                   opt.view_bind},
+          view_log);
+      const auto deadline = Clock::now() + std::chrono::seconds(10);
+      while (view_url.empty() && view_process->running() && Clock::now() < deadline &&
+             dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
+        std::ifstream in(view_log);
+        for (std::string l; std::getline(in, l);) {
+          if (const auto at = l.find("http://"); l.rfind("bsn view: ", 0) == 0 && at != std::string::npos)
+            view_url = l.substr(at, l.find(' ', at) - at);
+        }
+      }
+      if (view_url.empty()) {
+        std::ifstream in(view_log);
+        std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        std::fprintf(stderr, "bsn demo: error: bsn view did not start:\n%s", text.c_str());
+        exit_code = 2;
+      } else {
+        std::printf("bsn demo: live 3D view at %s\n", view_url.c_str());
+        std::fflush(stdout);
+      }
+    }
 
     const bool tty = isatty(STDOUT_FILENO) != 0;
     const auto start = Clock::now();
@@ -214,13 +247,14 @@ int run_demo(const DemoOptions& opt) {
         break;
       }
       if (now >= next_draw) {
-        std::fputs(render(view, joint_order, elapsed, tty).c_str(), stdout);
+        std::fputs(render(view, joint_order, elapsed, tty, view_url).c_str(), stdout);
         if (!tty) std::fputs("\n", stdout);
         std::fflush(stdout);
         next_draw = now + (tty ? std::chrono::milliseconds(200) : std::chrono::milliseconds(1000));
       }
     }
 
+    if (view_process) view_process->stop();
     // Sensors first, so the fusion service sees them go before it stops itself.
     for (auto& s : sims) s->stop();
     if (fusion_process && fusion_process->stop() != std::optional<int>(0) && exit_code == 0) {
@@ -257,22 +291,27 @@ int run_demo(const DemoOptions& opt) {
 }  // namespace
 
 Command demo_command() {
-  return {"demo", "Simulated lower body + fusion, live joint angles in the terminal", [](CLI::App* cmd) {
-            auto opt = std::make_shared<DemoOptions>();
-            cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)")
-                ->check(non_negative_number(1e9));
-            cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
-            cmd->add_option("--rate", opt->rate_hz, "sample rate of the simulated nodes, Hz")
-                ->capture_default_str()
-                ->check(positive_number(10000.0));  // as bsn sim --rate
-            cmd->add_flag("--calibrate", opt->calibrate,
-                          "instead: live calibration of a simulated node with a hard-iron offset, heading error "
-                          "before and after");
-            add_domain_option(cmd, opt->domain);
-            return [opt] {
-              return opt->calibrate ? run_calibration_demo(5.0, opt->duration_s, opt->domain) : run_demo(*opt);
-            };
-          }};
+  return {
+      "demo", "Simulated lower body + fusion, live joint angles in the terminal", [](CLI::App* cmd) {
+        auto opt = std::make_shared<DemoOptions>();
+        cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: run until Ctrl-C)")
+            ->check(non_negative_number(1e9));
+        cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
+        cmd->add_option("--rate", opt->rate_hz, "sample rate of the simulated nodes, Hz")
+            ->capture_default_str()
+            ->check(positive_number(10000.0));  // as bsn sim --rate
+        cmd->add_flag("--calibrate", opt->calibrate,
+                      "instead: live calibration of a simulated node with a hard-iron offset, heading error "
+                      "before and after");
+        cmd->add_flag("--view", opt->view, "also start bsn view (live 3D view in the browser) and print its URL");
+        cmd->add_option("--view-port", opt->view_port, "with --view: its HTTP port")
+            ->capture_default_str()
+            ->check(number_in(0, 65535));
+        cmd->add_option("--view-bind", opt->view_bind, "with --view: the address it listens on")->capture_default_str();
+        add_domain_option(cmd, opt->domain);
+        return
+            [opt] { return opt->calibrate ? run_calibration_demo(5.0, opt->duration_s, opt->domain) : run_demo(*opt); };
+      }};
 }
 
 }  // namespace bsn::services

@@ -42,6 +42,8 @@ Delivery delivery(TopicQos kind) {
       return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 16, 16};
     case TopicQos::kProgress:
       return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 4, 16};
+    case TopicQos::kRos2:
+      return {RELIABLE_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 10, 64};
   }
   return {BEST_EFFORT_RELIABILITY_QOS, VOLATILE_DURABILITY_QOS, 1, 1};
 }

@@ -6,9 +6,11 @@
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
 #include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <string>
 #include <tuple>
 
 #include "bsn_idl/bsnPubSubTypes.h"
+#include "bsn_idl/ros2PubSubTypes.h"
 
 namespace bsn::dds {
 
@@ -21,6 +23,8 @@ enum class TopicQos {
   kCommand,             ///< RELIABLE, VOLATILE, KEEP_LAST 16 (calibration requests)
   kProgress,            ///< RELIABLE, VOLATILE, KEEP_LAST 4, liveliness leases 1 s (writer) and 1.5 s (reader):
                         ///< a reader learns within 1.5 s that the writer's process died (calibration progress)
+  kRos2,                ///< RELIABLE, VOLATILE, KEEP_LAST 10: matches ROS 2's default (reliable, depth 10) and
+                        ///< sensor-data (best effort, depth 5) subscriptions
 };
 
 /// A topic whose samples are `PubSub::type` (e.g. bsn::RawSample for bsn::RawSamplePubSubType).
@@ -51,6 +55,17 @@ inline constexpr std::tuple kAllTopics{kRawTopic,
                                        kCalibrationRequestTopic,
                                        kCalibrationResultTopic,
                                        kCalibrationProgressTopic};
+
+// The ROS 2 mirror (bsn ros2-bridge): ROS 2 names and types, "rt/" + the ROS topic name as ROS 2's rmw spells them.
+// Not in kAllTopics: they are no bsn types (bsn echo and bsn record read the bsn topics they mirror).
+inline constexpr Topic<tf2_msgs::msg::dds_::TFMessage_PubSubType> kRos2TfTopic{"rt/tf", TopicQos::kRos2};
+inline constexpr Topic<sensor_msgs::msg::dds_::JointState_PubSubType> kRos2JointStatesTopic{"rt/bsn/joint_states",
+                                                                                            TopicQos::kRos2};
+/// Per segment: rt/bsn/<segment>/imu (ROS 2: /bsn/<segment>/imu). `name` must outlive the Topic.
+inline Topic<sensor_msgs::msg::dds_::Imu_PubSubType> ros2_imu_topic(const std::string& name) {
+  return {name.c_str(), TopicQos::kRos2};
+}
+inline std::string ros2_imu_topic_name(const std::string& segment) { return "rt/bsn/" + segment + "/imu"; }
 
 /// Calls `f(topic)` for every topic of kAllTopics, in order.
 template <class F>
