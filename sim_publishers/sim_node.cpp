@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "bsn/dds/conversions.hpp"
+#include "bsn/dds/sample_source.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/io/recording.hpp"
 #include "bsn/logging/log.hpp"
@@ -76,7 +77,8 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   auto raw_writer = frame.participant().make_writer(dds::kRawTopic);
   auto truth_writer = frame.participant().make_writer(dds::kTruthOrientationTopic);
   logging::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
-                    spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain);
+                    spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain,
+                    " (raw samples from writer ", dds::writer_name(raw_writer->guid()), ")");
   bsn::RawSample raw;
   raw.node_id(opt.node);
   bsn::Orientation truth;

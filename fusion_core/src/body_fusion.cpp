@@ -32,7 +32,7 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
   }
 }
 
-const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arrival_ns) {
+const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arrival_ns, const SourceId& source) {
   SampleResult& r = result_ = SampleResult{};
   const auto index = segment_of_node_.find(in.node);
   if (index == segment_of_node_.end()) {
@@ -44,6 +44,33 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
   }
   r.segment = index->second;
   Segment& seg = segments_[r.segment];
+  if (source.known()) {
+    if (!seg.source) {
+      seg.source = source;  // the first writer heard owns the node
+    } else if (*seg.source != source) {
+      // Stale by the flag (check_stale) or by this arrival, whichever comes first: the owner has been silent.
+      const bool owner_silent =
+          seg.stale || (seg.last_arrival_ns && arrival_ns > *seg.last_arrival_ns + stale_timeout_ns_);
+      if (!owner_silent) {
+        // Two writers of one node interleave two unrelated streams; the owner's keeps the filter. The rejected
+        // sample leaves the gate's stream and the node's freshness alone.
+        seg.gate.refuse(SampleVerdict::kConflictingSource);
+        r.outcome = SampleOutcome::kGateRejected;
+        r.verdict = SampleVerdict::kConflictingSource;
+        r.new_conflicting_source = seg.conflicting_source != source;
+        seg.conflicting_source = source;
+        return r;
+      }
+      // The owner went stale: this writer takes the node over. Its sequence numbers and clock are its own, so the
+      // gate starts a new stream and the filter restarts.
+      r.source_handover = true;
+      r.previous_source = *seg.source;
+      seg.source = source;
+      ++seg.source_handovers;
+      seg.gate.restart_stream();
+      seg.filter->reset();
+    }
+  }
   seg.last_arrival_ns = arrival_ns;
   r.node_fresh = std::exchange(seg.stale, false);
 

@@ -8,7 +8,7 @@ namespace bsn::fusion {
 namespace {
 
 constexpr std::string_view kReasonNames[kRejectionReasonCount] = {"non_finite", "out_of_range", "time_backward",
-                                                                  "time_jump", "duplicate"};
+                                                                  "time_jump",  "duplicate",    "conflicting_source"};
 
 bool within(const Vec3& v, double limit) { return v.cwiseAbs().maxCoeff() <= limit; }
 
@@ -26,6 +26,8 @@ int rejection_index(SampleVerdict v) {
       return 3;
     case SampleVerdict::kDuplicate:
       return 4;
+    case SampleVerdict::kConflictingSource:
+      return 5;
     case SampleVerdict::kAccepted:
     case SampleVerdict::kAcceptedClockReset:
       break;
@@ -69,6 +71,22 @@ SampleVerdict SampleGate::check(std::uint64_t seq, const ImuSample& s) {
     return accept(SampleVerdict::kAccepted, seq, s.timestamp_ns);
   }
   return reject(verdict, seq);
+}
+
+void SampleGate::refuse(SampleVerdict reason) {
+  const int index = rejection_index(reason);
+  if (index < 0) return;  // not a rejection: nothing to count
+  ++counters_.received;
+  ++counters_.rejected[static_cast<std::size_t>(index)];
+}
+
+void SampleGate::restart_stream() {
+  have_last_ = false;
+  last_seq_ = last_ns_ = next_seq_ = 0;
+  rejected_in_window_ = 0;
+  period_ns_ = 0.0;
+  candidate_count_ = 0;
+  candidate_ns_ = 0;
 }
 
 SampleVerdict SampleGate::reject(SampleVerdict verdict, std::uint64_t seq) {

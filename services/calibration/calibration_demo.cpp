@@ -16,6 +16,7 @@
 #include "bsn/dds/child_process.hpp"
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/participant.hpp"
+#include "bsn/dds/sample_source.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/fusion/orientation_error.hpp"
 #include "bsn/logging/log.hpp"
@@ -77,10 +78,12 @@ int run_calibration_demo(double speed, double duration_s, int domain) {
     dds::Participant participant({domain, "bsn demo --calibrate"});
     auto truth_reader =
         participant.make_reader(dds::kTruthOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
+          if (!dds::finite_values(o)) return;  // never a number to compare with
           std::lock_guard lock(watch.mutex);
           watch.truth[o.timestamp_ns()] = dds::to_quat(o.quat());
         });
     auto estimate_reader = participant.make_reader(dds::kOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
+      if (!dds::finite_values(o)) return;
       std::lock_guard lock(watch.mutex);
       const auto t = watch.truth.find(o.timestamp_ns());
       if (t == watch.truth.end()) return;

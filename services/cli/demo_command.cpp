@@ -16,7 +16,9 @@
 
 #include "bsn/config/body_config.hpp"
 #include "bsn/dds/child_process.hpp"
+#include "bsn/dds/conversions.hpp"
 #include "bsn/dds/participant.hpp"
+#include "bsn/dds/sample_source.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/logging/log.hpp"
 #include "calibration_client.hpp"
@@ -42,12 +44,16 @@ constexpr double kDeg = 180.0 / std::numbers::pi;
 
 struct JointView {
   bsn::JointAngles latest;
+  bool latest_finite = true;  ///< false: the latest sample held a NaN or Inf (shown flagged, no numbers)
   std::uint64_t count = 0;
+  std::uint64_t non_finite = 0;  ///< samples with non-finite numbers
+  std::size_t writers = 1;       ///< writers of this joint within the last second (more than 1: a conflict)
 };
 
 struct DemoView {
   std::mutex mutex;
   std::map<std::string, JointView> joints;
+  dds::KeyWriters key_writers;
   bsn::Status status;
   bool have_status = false;
 };
@@ -72,10 +78,18 @@ std::string render(DemoView& view, const std::vector<std::string>& joint_order, 
       const auto& j = it->second.latest;
       // Names from the network are escaped: a writer on the domain cannot drive this terminal.
       const std::string pc = logging::printable(j.parent(), 24) + " -> " + logging::printable(j.child(), 24);
-      std::snprintf(line, sizeof line, "%-10s %-18s %4s %9.2f %9.2f %9.2f  %7llu  %s\n", name.c_str(), pc.c_str(),
-                    logging::printable(j.axes(), 8).c_str(), j.angles()[0] * kDeg, j.angles()[1] * kDeg,
-                    j.angles()[2] * kDeg, static_cast<unsigned long long>(it->second.count),
-                    format_flags(j.flags()).c_str());
+      std::string flags = format_flags(j.flags());
+      if (it->second.non_finite) flags += " non-finite=" + std::to_string(it->second.non_finite);
+      if (it->second.writers > 1) flags += " WRITERS=" + std::to_string(it->second.writers);
+      if (it->second.latest_finite) {
+        std::snprintf(line, sizeof line, "%-10s %-18s %4s %9.2f %9.2f %9.2f  %7llu  %s\n", name.c_str(), pc.c_str(),
+                      logging::printable(j.axes(), 8).c_str(), j.angles()[0] * kDeg, j.angles()[1] * kDeg,
+                      j.angles()[2] * kDeg, static_cast<unsigned long long>(it->second.count), flags.c_str());
+      } else {
+        std::snprintf(line, sizeof line, "%-10s %-18s %4s %29s  %7llu  %s\n", name.c_str(), pc.c_str(),
+                      logging::printable(j.axes(), 8).c_str(), "NON-FINITE",
+                      static_cast<unsigned long long>(it->second.count), flags.c_str());
+      }
     }
     out += line;
   }
@@ -176,10 +190,13 @@ int run_demo(const DemoOptions& opt) {
   {
     dds::Participant participant({opt.domain, "bsn demo"});
     auto joint_reader = participant.make_reader(
-        dds::kJointAnglesTopic, [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo&) {
+        dds::kJointAnglesTopic, [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo& info) {
           std::lock_guard lock(view.mutex);
           auto& v = view.joints[j.joint()];
+          v.writers = view.key_writers.note(j.joint(), info.sample_identity.writer_guid(), dds::monotonic_ns());
           v.latest = j;
+          v.latest_finite = dds::finite_values(j);
+          v.non_finite += v.latest_finite ? 0 : 1;
           ++v.count;
         });
     auto status_reader = participant.make_reader(

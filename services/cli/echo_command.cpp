@@ -3,9 +3,14 @@
 #include <chrono>
 #include <cstdio>
 #include <mutex>
+#include <set>
 #include <string>
+#include <type_traits>
 
+#include "bsn/dds/conversions.hpp"
+#include "bsn/dds/sample_source.hpp"
 #include "bsn/dds/shutdown.hpp"
+#include "bsn/logging/log.hpp"
 #include "format.hpp"
 #include "sample_fields.hpp"
 #include "tools.hpp"
@@ -52,6 +57,35 @@ struct Printer {
   }
 };
 
+// What a reader of estimates must not take at face value: a key written by more than one writer at once (a second
+// fusion service, a foreign writer), and numbers that are not finite. Both are flagged and counted, never hidden.
+template <class T>
+constexpr bool kIsEstimate = std::is_same_v<T, bsn::Orientation> || std::is_same_v<T, bsn::JointAngles>;
+
+struct EstimateWatch {
+  std::mutex mutex;
+  dds::KeyWriters writers;
+  std::uint64_t non_finite = 0;
+  std::set<std::string> shared_keys;  ///< keys seen with more than one writer (listed at the end, bounded)
+  static constexpr std::size_t kMaxSharedKeysListed = 16;
+  std::size_t max_writers = 1;
+
+  /// Writers of the sample's key within the last second; warns once per key when more than one.
+  std::size_t note(const std::string& key, const eprosima::fastdds::dds::SampleInfo& info, bool finite) {
+    std::lock_guard lock(mutex);
+    non_finite += finite ? 0 : 1;
+    const std::size_t n = writers.note(key, info.sample_identity.writer_guid(), dds::monotonic_ns());
+    if (n > 1 && shared_keys.size() < kMaxSharedKeysListed && shared_keys.insert(key).second)
+      logging::log_warn("key '", logging::printable(key), "' is written by ", n, " writers at once (another ",
+                        "fusion service or a foreign writer on the domain); its lines say writers=", n);
+    max_writers = std::max(max_writers, n);
+    return n;
+  }
+};
+
+std::string key_name(const bsn::Orientation& s) { return s.segment(); }
+std::string key_name(const bsn::JointAngles& s) { return s.joint(); }
+
 // One line per sample; an orientation line says which of the two orientation topics it comes from.
 std::string format_line(const bsn::Orientation& s, std::string_view topic) {
   return format_sample(s, topic == dds::kTruthOrientationTopic.name ? "truth" : "orientation");
@@ -60,6 +94,10 @@ template <class T>
 std::string format_line(const T& s, std::string_view) {
   return format_sample(s);
 }
+std::string non_finite_line(const bsn::Orientation& s, std::string_view topic) {
+  return format_non_finite(s, topic == dds::kTruthOrientationTopic.name ? "truth" : "orientation");
+}
+std::string non_finite_line(const bsn::JointAngles& s, std::string_view) { return format_non_finite(s); }
 
 // --format csv|json: SI values at full precision, for scripts. The CSV header comes with the first sample.
 template <class T>
@@ -109,18 +147,44 @@ int run_echo(const EchoOptions& opt) {
     return 2;
   }
   Printer printer(opt);
+  EstimateWatch watch;
   DdsCommandFrame frame(opt.domain, "bsn echo");
   std::shared_ptr<void> reader;  // of the one topic named, whatever its type
   dds::for_each_topic([&](const auto& topic) {
     if (opt.topic != topic.name) return;
-    reader = frame.participant().make_reader(topic, [&printer, &opt, name = topic.name](const auto& s, const auto&) {
-      if (opt.format == "text") {
-        printer.print(format_line(s, name));
-      } else {
-        printer.print(machine_line(s, name, opt.format), csv_header_of(s, opt.format));
-      }
-    });
+    reader = frame.participant().make_reader(
+        topic, [&printer, &opt, &watch, name = topic.name](const auto& s, const auto& info) {
+          using T = std::remove_cvref_t<decltype(s)>;
+          if constexpr (kIsEstimate<T>) {
+            const bool finite = dds::finite_values(s);
+            const std::size_t writers = watch.note(key_name(s), info, finite);
+            if (opt.format == "text") {
+              printer.print((finite ? format_line(s, name) : non_finite_line(s, name)) +
+                            (writers > 1 ? " writers=" + std::to_string(writers) : ""));
+            } else if (finite) {  // a machine format has no place for a flag: such samples are counted instead
+              printer.print(machine_line(s, name, opt.format), csv_header_of(s, opt.format));
+            }
+          } else if (opt.format == "text") {
+            printer.print(format_line(s, name));
+          } else {
+            printer.print(machine_line(s, name, opt.format), csv_header_of(s, opt.format));
+          }
+        });
   });
+  // At the end, whatever ended it: what was flagged, on stderr (stdout stays the samples).
+  struct Summary {
+    EstimateWatch& watch;
+    const std::string& topic;
+    ~Summary() {
+      std::lock_guard lock(watch.mutex);
+      if (watch.non_finite > 0)
+        std::fprintf(stderr, "bsn echo: %llu sample(s) on %s held non-finite numbers: flagged, never printed as data\n",
+                     static_cast<unsigned long long>(watch.non_finite), topic.c_str());
+      if (!watch.shared_keys.empty())
+        std::fprintf(stderr, "bsn echo: %zu key(s) on %s were written by more than one writer at once (up to %zu)\n",
+                     watch.shared_keys.size(), topic.c_str(), watch.max_writers);
+    }
+  } summary{watch, opt.topic};
   const auto start = Clock::now();
   return frame.run_ticks(std::chrono::milliseconds(20), [&]() -> std::optional<int> {
     if (opt.timeout_s > 0.0 && Clock::now() - start > std::chrono::duration<double>(opt.timeout_s)) {

@@ -79,6 +79,17 @@ std::string format_sample(const bsn::JointAngles& s) {
          " flags=" + format_flags(s.flags());
 }
 
+std::string format_non_finite(const bsn::Orientation& s, const char* prefix) {
+  return std::string(prefix) + " " + text(s.segment()) + printf_string(" t=%.6fs", seconds(s.timestamp_ns())) +
+         " NON-FINITE (values not shown) flags=" + format_flags(s.flags());
+}
+
+std::string format_non_finite(const bsn::JointAngles& s) {
+  return "joint " + text(s.joint()) + " (" + text(s.parent()) + " -> " + text(s.child()) + ")" +
+         printf_string(" t=%.6fs", seconds(s.timestamp_ns())) +
+         " NON-FINITE (values not shown) flags=" + format_flags(s.flags());
+}
+
 std::string format_sample(const bsn::Status& s) {
   std::string out = "status " + text(s.process_id()) +
                     printf_string(" period=%.2fs unknown_node_samples=%llu qos_mismatches=%llu write_failures=%llu",
@@ -101,6 +112,9 @@ std::string format_sample(const bsn::Status& s) {
                       static_cast<unsigned long long>(n.missing()), static_cast<unsigned long long>(n.clock_resets()),
                       n.stale() ? " STALE" : "");
     for (const auto& r : n.rejected()) out += " " + text(r.reason()) + "=" + std::to_string(r.count());
+    if (n.source_handovers()) out += " source_handovers=" + std::to_string(n.source_handovers());
+    if (!n.conflicting_writer().empty())
+      out += " CONFLICT writer=" + text(n.source_writer()) + " other=" + text(n.conflicting_writer());
   }
   return out;
 }

@@ -11,6 +11,7 @@
 #include "bsn/config/body_config.hpp"
 #include "bsn/config/calibration_file.hpp"
 #include "bsn/dds/conversions.hpp"
+#include "bsn/dds/sample_source.hpp"
 #include "bsn/logging/log.hpp"
 
 namespace bsn::services {
@@ -38,7 +39,8 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
       fusion_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
       accepted_at_window_start_(fusion_.body().segments.size(), 0),
       rate_hz_(fusion_.body().segments.size(), 0.0),
-      calibration_id_(fusion_.body().segments.size()) {
+      calibration_id_(fusion_.body().segments.size()),
+      conflict_logged_ns_(fusion_.body().segments.size(), 0) {
   if (options_.process_id.empty()) options_.process_id = default_process_id();
   // --best-effort switches both estimate topics from their own delivery to BEST_EFFORT.
   const auto estimate = [this](const auto& topic) {
@@ -53,8 +55,11 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
   status_reader_ = participant_.make_reader(
       dds::kStatusTopic, [this](const bsn::Status& st, const eprosima::fastdds::dds::SampleInfo&) { on_status(st); });
   // The raw reader goes last: its callback may fire as soon as it exists.
+  // Each sample's writer goes with it: a node's samples are taken from one writer at a time.
   raw_reader_ = participant_.make_reader(
-      dds::kRawTopic, [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo&) { on_raw(raw); });
+      dds::kRawTopic, [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo& info) {
+        on_raw(raw, dds::source_id(info.sample_identity.writer_guid()));
+      });
   // Live calibrations (TRANSIENT_LOCAL: the ones published before this start arrive too and override the body
   // file's).
   calibration_reader_ = participant_.make_reader(
@@ -98,16 +103,17 @@ void FusionService::on_calibration(const bsn::CalibrationResult& r) {
   publish_status(dds::monotonic_ns());
 }
 
-void FusionService::on_raw(const bsn::RawSample& raw) {
+void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer) {
   std::lock_guard lock(mutex_);
   const std::uint64_t now = dds::monotonic_ns();
-  const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now);
+  const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now, writer);
   if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
     if (r.new_unknown_node)
       logging::log_warn("samples from node '", logging::printable(raw.node_id()),
                         "', which is on no segment of the body model; ignored");
     return;
   }
+  log_source_events(r, now);
   const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
   if (r.node_fresh) {
     logging::log_info("node '", spec.node, "' (", spec.name, ") is sending again");
@@ -118,6 +124,28 @@ void FusionService::on_raw(const bsn::RawSample& raw) {
   if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
   publish_orientation(r, raw.timestamp_ns());
   if (r.joint) publish_joint(*r.joint, raw.timestamp_ns());
+}
+
+void FusionService::log_source_events(const fusion::SampleResult& r, std::uint64_t now) {
+  const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
+  const fusion::BodyFusion::Segment& seg = fusion_.segment(r.segment);
+  if (r.source_handover) {
+    logging::log_warn("node '", spec.node, "' (", spec.name, "): its writer ", dds::writer_name(r.previous_source),
+                      " went stale and writer ", dds::writer_name(*seg.source), " took the node over (handover ",
+                      seg.source_handovers, "; counted as source_handovers on bsn/status); its filter restarts");
+    status_due_ = true;
+  }
+  if (!r.new_conflicting_source) return;
+  // A rogue that keeps making new writers must not flood the log: one line per segment per period; every sample
+  // is still counted, and bsn/status names the last conflicting writer.
+  std::uint64_t& logged = conflict_logged_ns_[r.segment];
+  if (logged != 0 && now - logged < kConflictLogPeriodNs) return;
+  logged = now;
+  logging::log_warn("node '", spec.node, "' (", spec.name, "): samples from a second writer, ",
+                    dds::writer_name(*seg.conflicting_source), ", rejected as conflicting_source: the node's samples ",
+                    "come from writer ", dds::writer_name(*seg.source), " until it goes stale. Another process ",
+                    "publishes this node id (a second sensor process with the same --node, or a rogue one).");
+  status_due_ = true;
 }
 
 void FusionService::on_status(const bsn::Status& other) {
@@ -218,6 +246,9 @@ void FusionService::publish_status(std::uint64_t now) {
     n.stale(state.stale);
     n.last_sample_age_s(state.last_arrival_ns ? seconds(now - *state.last_arrival_ns) : -1.0);
     n.last_calibration_id(calibration_id_[i]);
+    n.source_writer(state.source ? dds::writer_name(*state.source) : "");
+    n.conflicting_writer(state.conflicting_source ? dds::writer_name(*state.conflicting_source) : "");
+    n.source_handovers(state.source_handovers);
     nodes.push_back(std::move(n));
   }
   st.nodes(std::move(nodes));

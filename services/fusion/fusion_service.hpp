@@ -32,7 +32,8 @@ class FusionService {
   void tick();
 
  private:
-  void on_raw(const bsn::RawSample& raw);                     ///< called from the DDS thread
+  void on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer);  ///< called from the DDS thread
+  void log_source_events(const fusion::SampleResult& r, std::uint64_t now_ns);
   void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
   void on_status(const bsn::Status& status);  ///< another process's status (DDS thread): a second fusion?
   void publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);
@@ -66,6 +67,9 @@ class FusionService {
   std::vector<std::string> calibration_id_;
   std::map<std::pair<std::size_t, int>, std::string> applied_calibration_;
   std::string last_calibration_id_;
+  /// Per segment, when a conflicting writer was last logged (0: never): at most one line per kConflictLogPeriodNs.
+  std::vector<std::uint64_t> conflict_logged_ns_;
+  static constexpr std::uint64_t kConflictLogPeriodNs = 10'000'000'000;
   bsn::Orientation orientation_msg_;
   bsn::JointAngles joint_msg_;
 };

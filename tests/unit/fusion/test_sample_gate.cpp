@@ -220,6 +220,8 @@ TEST(SampleGate, ReasonNamesAreStable) {
   EXPECT_EQ(rejection_reason_name(2), "time_backward");
   EXPECT_EQ(rejection_reason_name(3), "time_jump");
   EXPECT_EQ(rejection_reason_name(4), "duplicate");
+  EXPECT_EQ(rejection_reason_name(5), "conflicting_source");
+  EXPECT_EQ(rejection_reason_name(kRejectionReasonCount), "unknown");
 }
 
 }  // namespace

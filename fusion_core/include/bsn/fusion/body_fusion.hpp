@@ -3,6 +3,7 @@
 // (clock reset, node stale or fresh, a new unknown node) comes back as events.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <span>
 #include <string_view>
@@ -13,6 +14,14 @@
 #include "bsn/fusion/sample_gate.hpp"
 
 namespace bsn::fusion {
+
+/// The writer a sample came from, opaque to the core: a service fills in what its transport names a writer by (a
+/// DDS writer GUID is 16 bytes). All zero is an unknown source (an offline pipeline): such samples skip the check.
+struct SourceId {
+  std::array<std::uint8_t, 16> bytes{};
+  bool known() const { return bytes != std::array<std::uint8_t, 16>{}; }
+  friend bool operator==(const SourceId&, const SourceId&) = default;
+};
 
 /// One raw sample as a node sent it: node id, the node's sequence number, uncalibrated values on the sensor clock.
 struct NodeSample {
@@ -39,6 +48,12 @@ struct SampleResult {
   bool node_fresh = false;                           ///< event: the node was stale and sends again
   bool clock_reset = false;       ///< event: the node's clock moved to a new time base; its filter restarted
   bool new_unknown_node = false;  ///< event: first sample of an unknown node, which is now listed
+  /// event: rejected as kConflictingSource from a writer other than the last one rejected so for this node
+  bool new_conflicting_source = false;
+  /// event: the node was stale and this sample's writer took it over from the previous one (whose id is in
+  /// previous_source); its gate restarted the stream and its filter restarted
+  bool source_handover = false;
+  SourceId previous_source;
   // With kEstimated: the segment's orientation (sensor-to-earth), the filter's flags and gyro bias (rad/s).
   Quat orientation = Quat::Identity();
   FilterFlags flags;
@@ -65,19 +80,27 @@ class BodyFusion {
     SampleGate gate;  ///< counts received, accepted, missing, clock resets, rejected by reason
     calib::SensorCalibration calibration;
     std::optional<std::size_t> parent;
-    std::uint64_t filter_rejected = 0;  ///< passed the gate, not used by the filter
-    std::optional<Quat> q;              ///< the last orientation
-    FilterFlags flags;                  ///< of the last orientation
-    std::optional<std::uint64_t> last_arrival_ns;
+    std::uint64_t filter_rejected = 0;             ///< passed the gate, not used by the filter
+    std::optional<Quat> q;                         ///< the last orientation
+    FilterFlags flags;                             ///< of the last orientation
+    std::optional<std::uint64_t> last_arrival_ns;  ///< of the last sample from the node's source
     bool stale = false;  ///< silent for the stale timeout (or, never heard of, the discovery grace)
+    /// The writer the node's samples are taken from: the first one heard, until the node goes stale; then the
+    /// next writer heard takes over (a handover). Samples from any other writer are rejected as kConflictingSource
+    /// and do not keep the node fresh. Unset until the first sample with a known source.
+    std::optional<SourceId> source;
+    std::optional<SourceId> conflicting_source;  ///< the last other writer rejected as kConflictingSource
+    std::uint64_t source_handovers = 0;          ///< times another writer took the node over after it went stale
   };
 
   /// start_ns: the start on the arrival clock (monotonic, ns), from which the discovery grace runs.
   /// Throws std::invalid_argument for a filter spec or gate parameters that make_filter or SampleGate refuse.
   BodyFusion(BodyModel body, const Calibrations& calibrations, const Params& params, std::uint64_t start_ns);
 
-  /// Runs one sample through its segment's pipeline; the result is valid until the next call.
-  const SampleResult& process(const NodeSample& sample, std::uint64_t arrival_ns);
+  /// Runs one sample, from the writer `source`, through its segment's pipeline; the result is valid until the next
+  /// call. A sample whose source is not the node's (see Segment::source) is counted by the gate as
+  /// kConflictingSource and goes no further.
+  const SampleResult& process(const NodeSample& sample, std::uint64_t arrival_ns, const SourceId& source = {});
   /// A live calibration: replaces the channels that `update` holds in the calibration of `node`'s segment (the
   /// others stay), from its next sample on, and restarts its filter, whose state (orientation, the disturbance
   /// detector's magnetic reference, the gyro bias estimate) was built on the old calibration. Returns the

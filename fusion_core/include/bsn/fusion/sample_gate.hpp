@@ -18,9 +18,10 @@ enum class SampleVerdict {
   kTimeBackward,        ///< timestamp older than the last accepted sample (or reordered)
   kTimeJump,            ///< timestamp too far ahead of the last accepted sample
   kDuplicate,           ///< same sequence number and timestamp as the last accepted sample
+  kConflictingSource,   ///< from a second writer while the node's first writer is not stale (BodyFusion's check)
 };
 
-inline constexpr std::size_t kRejectionReasonCount = 5;
+inline constexpr std::size_t kRejectionReasonCount = 6;
 
 /// Index of a rejection reason in SampleGate::Counters::rejected, or -1 for an accepting verdict.
 int rejection_index(SampleVerdict v);
@@ -72,6 +73,13 @@ class SampleGate {
 
   /// Judges one sample with its per-node sequence number.
   SampleVerdict check(std::uint64_t seq, const ImuSample& sample);
+  /// Counts a sample refused before the checks (as received and rejected for `reason`) without letting it touch
+  /// the stream's state: it belongs to another stream (a conflicting source), so its seq and timestamp mean nothing
+  /// here.
+  void refuse(SampleVerdict reason);
+  /// Forgets the stream (last sample, sequence base, period, candidate time base) but keeps the counters: the next
+  /// sample starts a new stream, as from another source after a handover.
+  void restart_stream();
 
   const Counters& counters() const { return counters_; }
   const Params& params() const { return params_; }

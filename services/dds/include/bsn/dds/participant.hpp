@@ -61,6 +61,8 @@ class Writer {
   bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
   /// Readers currently matched.
   int matched() const { return events_->matched.load(); }
+  /// The writer's GUID: what readers see as the sample's writer (SampleInfo::sample_identity.writer_guid()).
+  eprosima::fastrtps::rtps::GUID_t guid() const { return writer_->guid(); }
 
  private:
   eprosima::fastdds::dds::DataWriter* writer_;
