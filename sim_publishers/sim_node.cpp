@@ -68,6 +68,19 @@ int write_scenario_files(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   return 0;
 }
 
+// The monotonic instant of scenario time 0: `started`, or the monotonic equivalent of a Unix time (which may lie
+// before `started`: a late joiner).
+std::uint64_t scenario_start_ns(double start_at_unix_s, std::uint64_t started) {
+  if (!(start_at_unix_s > 0.0)) return started;
+  timespec real{};
+  clock_gettime(CLOCK_REALTIME, &real);
+  const double ahead_s =
+      start_at_unix_s - (static_cast<double>(real.tv_sec) + 1e-9 * static_cast<double>(real.tv_nsec));
+  const auto ahead_ns = static_cast<std::int64_t>(std::llround(ahead_s * 1e9));
+  if (ahead_ns >= 0) return started + static_cast<std::uint64_t>(ahead_ns);
+  return started - std::min(started, static_cast<std::uint64_t>(-ahead_ns));
+}
+
 int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   // A one-segment scenario (a free body) needs no --segment; otherwise it defaults to the node id.
   const Body body = build_body(spec);
@@ -84,14 +97,32 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   bsn::Orientation truth;
   truth.segment(segment);
   truth.node_id(opt.node);
+  // The joint to the segment's parent, if it has one: its true angles on bsn/truth/joint_angles.
+  const SegmentDef& def = body.segment(*body.find(segment));
+  std::unique_ptr<dds::Writer<bsn::JointAngles>> joint_writer;
+  bsn::JointAngles joint;
+  if (def.parent >= 0) {
+    joint_writer = frame.participant().make_writer(dds::kTruthJointAnglesTopic);
+    joint.joint(def.joint.empty() ? body.segment(static_cast<std::size_t>(def.parent)).name + "-" + segment
+                                  : def.joint);
+    joint.parent(body.segment(static_cast<std::size_t>(def.parent)).name);
+    joint.child(segment);
+    joint.axes("zxy");  // the ISB joint coordinate system's sequence
+  }
   std::vector<ScenarioSample> out;
   std::uint64_t write_failures = 0, dropped = 0;
-  const std::uint64_t t0 = dds::monotonic_ns();
+  const std::uint64_t started = dds::monotonic_ns();
+  const std::uint64_t t0 = scenario_start_ns(opt.start_at_unix_s, started);
+  if (t0 > started + 1'000'000'000ull)
+    logging::log_info("waiting ", (t0 - started) / 1'000'000'000ull, " s for the common start");
   for (std::uint64_t k = 0; !dds::shutdown_requested() && runner.next(out); ++k) {
     const ScenarioSample& s = out[0];
     // Sensor time runs at scenario speed; the wall clock `speed` times faster.
     const std::uint64_t sensor_ns = t0 + s.sample.timestamp_ns;
-    if (!sleep_until(t0 + static_cast<std::uint64_t>(static_cast<double>(s.sample.timestamp_ns) / opt.speed))) break;
+    const std::uint64_t due_ns =
+        t0 + static_cast<std::uint64_t>(static_cast<double>(s.sample.timestamp_ns) / opt.speed);
+    if (due_ns < started) continue;  // a late joiner: the body moved on before this node started
+    if (!sleep_until(due_ns)) break;
     if (s.dropped) {
       ++dropped;  // lost on the link: the sequence number still advances
       continue;
@@ -104,6 +135,15 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
     truth.timestamp_ns(sensor_ns);
     dds::fill_orientation(s.truth, truth);
     truth_writer->write(truth);
+    if (joint_writer && s.joint_relative) {
+      joint.timestamp_ns(sensor_ns);
+      joint.quat(dds::to_wxyz(*s.joint_relative));
+      const fusion::Vec3 zxy = fusion::decompose(*s.joint_relative, fusion::AxisSequence{{2, 0, 1}});
+      joint.angles({zxy.x(), zxy.y(), zxy.z()});
+      joint.flags(bsn::FLAG_SEGMENT_FRAME);
+      dds::fill_anatomical(s.joint, s.joint_anatomical, joint);
+      joint_writer->write(joint);
+    }
   }
   if (write_failures > 0) logging::log_warn(write_failures, " raw samples could not be written");
   logging::log_info("node '", opt.node, "' stopped (", dropped, " samples dropped by the sensor model)");
@@ -179,6 +219,10 @@ services::Command sim_command() {
             cmd->add_option("--speed", opt->speed, "with --scenario: publish N times faster than real time")
                 ->capture_default_str()
                 ->check(services::positive_number(1e6));
+            cmd->add_option("--start-at", opt->start_at_unix_s,
+                            "the motion's time 0 at this Unix time, s (e.g. $(($(date +%s) + 3))): "
+                            "nodes given the same instant move as one body")
+                ->check(services::positive_number(1e11));
             cmd->add_option("--out", opt->out_dir, "with --scenario: write DIR/<segment>.hdf5 (BROAD layout) and exit");
             services::add_domain_option(cmd, opt->domain);
             return [opt, cmd] {

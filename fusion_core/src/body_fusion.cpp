@@ -28,6 +28,10 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
     segments_[i].gate = SampleGate(params.gate);
     if (const auto c = calibrations.find(spec.node); c != calibrations.end()) segments_[i].calibration = c->second;
     segments_[i].parent = body_.find_segment(spec.parent);
+    if (spec.sensor_to_segment) {
+      segments_[i].sensor_to_segment = spec.sensor_to_segment->normalized();
+      segments_[i].aligned = true;
+    }
     segment_of_node_.emplace(spec.node, i);
   }
 }
@@ -90,15 +94,23 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
     return r;
   }
   r.outcome = SampleOutcome::kEstimated;
-  r.orientation = *(seg.q = seg.filter->orientation());
+  const Quat q_sensor = seg.filter->orientation();
+  seg.q_segment = segment_orientation(q_sensor, seg.sensor_to_segment);
+  r.aligned = seg.aligned;
+  r.orientation = *(seg.q = seg.aligned ? *seg.q_segment : q_sensor);
   r.flags = seg.flags = seg.filter->flags();
   r.gyro_bias = seg.filter->gyro_bias();
   if (const Segment* parent = seg.parent ? &segments_[*seg.parent] : nullptr; parent && parent->q) {
+    const SegmentSpec& spec = body_.segments[r.segment];
     const Quat relative = canonical(relative_orientation(*parent->q, *seg.q));
+    const JointConvention convention = joint_convention(spec);
     r.joint = JointEstimate{*seg.parent,
                             r.segment,
                             relative,
-                            decompose(relative, body_.segments[r.segment].joint_axes),
+                            decompose(relative, spec.joint_axes),
+                            convention,
+                            anatomical_angles(relative_orientation(*parent->q_segment, *seg.q_segment), convention),
+                            parent->aligned && seg.aligned,
                             parent->stale || seg.stale,
                             parent->flags.initialising || seg.flags.initialising};
   }
@@ -114,6 +126,18 @@ std::optional<std::size_t> BodyFusion::update_calibration(std::string_view node,
   if (update.gyroscope) seg.calibration.gyroscope = update.gyroscope;
   if (update.magnetometer) seg.calibration.magnetometer = update.magnetometer;
   seg.filter->reset();
+  return index->second;
+}
+
+std::optional<std::size_t> BodyFusion::update_alignment(std::string_view node, const Quat& sensor_to_segment) {
+  const auto index = segment_of_node_.find(node);
+  if (index == segment_of_node_.end()) return std::nullopt;
+  Segment& seg = segments_[index->second];
+  seg.sensor_to_segment = sensor_to_segment.normalized();
+  seg.aligned = true;
+  // The frames change: a child's joint must not pair its new frame with this segment's last one in the old frame.
+  seg.q.reset();
+  seg.q_segment.reset();
   return index->second;
 }
 

@@ -57,6 +57,11 @@ std::string joint_name(const SegmentSpec& segment) {
   return segment.joint.empty() ? segment.parent + "-" + segment.name : segment.joint;
 }
 
+JointConvention joint_convention(const SegmentSpec& segment) {
+  if (segment.parent.empty()) return {};
+  return segment.anatomy ? *segment.anatomy : infer_joint_convention(joint_name(segment));
+}
+
 BodyModel default_lower_body() {
   BodyModel body;
   body.name = "lower_body";

@@ -2,11 +2,15 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <cerrno>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -37,17 +41,34 @@ struct DemoOptions {
   bool view = false;       ///< also start `bsn view` and print its URL
   int view_port = 8080;
   std::string view_bind = "127.0.0.1";
+  bool random = false;  ///< every node on its own random motion instead of the walking body
 };
 
 using Clock = std::chrono::steady_clock;
 constexpr double kDeg = 180.0 / std::numbers::pi;
 
+/// Per joint: the latest estimate, the simulator's truth by sensor time (to pair each estimate with the truth of its
+/// own instant), and the first angle's range and error against the truth once the filters have settled.
 struct JointView {
   bsn::JointAngles latest;
   bool latest_finite = true;  ///< false: the latest sample held a NaN or Inf (shown flagged, no numbers)
   std::uint64_t count = 0;
   std::uint64_t non_finite = 0;  ///< samples with non-finite numbers
   std::size_t writers = 1;       ///< writers of this joint within the last second (more than 1: a conflict)
+  std::map<std::uint64_t, std::array<double, 3>> truth;  ///< sensor time -> anatomical angles, the last ~2 s
+  double error_sq_sum = 0.0, recent_error_deg = 0.0;
+  std::uint64_t errors = 0;
+  /// The first angle's values in 0.5 deg bins over -180..180 deg: its range as percentiles, in bounded memory.
+  std::array<std::uint32_t, 720> histogram{};
+  std::uint64_t values = 0;
+  /// The angle below which `share` of the values lie, deg.
+  double percentile(double share) const {
+    const auto wanted = static_cast<std::uint64_t>(share * static_cast<double>(values));
+    std::uint64_t seen = 0;
+    for (std::size_t b = 0; b < histogram.size(); ++b)
+      if ((seen += histogram[b]) > wanted) return -180.0 + 0.5 * static_cast<double>(b) + 0.25;
+    return 180.0;
+  }
 };
 
 struct DemoView {
@@ -56,26 +77,102 @@ struct DemoView {
   dds::KeyWriters key_writers;
   bsn::Status status;
   bool have_status = false;
+  std::uint64_t settled_after_ns = 0;  ///< sensor time from which estimates count in the ranges and errors
 };
+
+// Seconds after the first estimate that the filters get to converge (they start in motion: the body walks from
+// the first sample) before the ranges and errors count.
+constexpr double kSettleSeconds = 8.0;
+
+void on_estimate(DemoView& view, const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo& info) {
+  std::lock_guard lock(view.mutex);
+  auto& v = view.joints[j.joint()];
+  v.writers = view.key_writers.note(j.joint(), info.sample_identity.writer_guid(), dds::monotonic_ns());
+  v.latest = j;
+  v.latest_finite = dds::finite_values(j);
+  v.non_finite += v.latest_finite ? 0 : 1;
+  ++v.count;
+  // A sample with NaN or Inf is shown flagged and counted, never scored (and never cast to a histogram bin).
+  if (!v.latest_finite || j.anatomy().empty() || (j.flags() & (bsn::FLAG_INITIALISING | bsn::FLAG_STALE))) return;
+  if (view.settled_after_ns == 0)
+    view.settled_after_ns = j.timestamp_ns() + static_cast<std::uint64_t>(kSettleSeconds * 1e9);
+  if (j.timestamp_ns() < view.settled_after_ns) return;
+  const double first = std::clamp(j.anatomical()[0] * kDeg, -180.0, 179.9);
+  ++v.histogram[static_cast<std::size_t>((first + 180.0) * 2.0)];
+  ++v.values;
+  if (const auto t = v.truth.find(j.timestamp_ns()); t != v.truth.end()) {
+    double worst = 0.0;
+    for (std::size_t i = 0; i < 3; ++i) worst = std::max(worst, std::abs(j.anatomical()[i] - t->second[i]) * kDeg);
+    v.recent_error_deg = worst;  // the live column: the largest of the three now
+    const double first = (j.anatomical()[0] - t->second[0]) * kDeg;
+    v.error_sq_sum += first * first;  // the summary: the first (flexion) angle's, as gait studies report it
+    ++v.errors;
+  }
+}
+
+void on_truth(DemoView& view, const bsn::JointAngles& j) {
+  std::lock_guard lock(view.mutex);
+  auto& truth = view.joints[j.joint()].truth;
+  truth[j.timestamp_ns()] = j.anatomical();
+  while (truth.size() > 256) truth.erase(truth.begin());
+}
+
+/// The scenario the demo's nodes share: the lower body walking, sensors mounted exactly along their segments (the
+/// mounting the fusion's default assumes), consumer MEMS errors with a calibrated magnetometer.
+std::string walking_scenario(double rate_hz, double duration_s) {
+  char text[1024];
+  std::snprintf(text, sizeof text,
+                "name: demo_walk\n"
+                "description: \"bsn demo: the lower body walking\"\n"
+                "duration_s: %.0f\n"
+                "rate_hz: %g\n"
+                "seed: 7\n"
+                "sensors:\n"
+                "  preset: consumer_mems\n"
+                "  mag: {hard_iron: [0, 0, 0], soft_iron: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}\n"
+                "body:\n"
+                "  kind: lower_body\n"
+                "  gait: {cadence_steps_per_min: 110, speed_m_s: 1.2, heading_deg: 90}\n"
+                "  mounting: {max_rotation_deg: 0, max_offset_m: 0}\n",
+                duration_s, rate_hz);
+  return text;
+}
 
 std::string render(DemoView& view, const std::vector<std::string>& joint_order, double elapsed_s, bool tty,
                    const std::string& view_url) {
   std::lock_guard lock(view.mutex);
   std::string out;
-  char line[256];
+  char line[512];
   if (tty) out += "\033[H\033[2J";  // home + clear screen
   std::snprintf(line, sizeof line, "bsn demo  %.1f s  joint angles in degrees (Ctrl-C stops)\n", elapsed_s);
   out += line;
   if (!view_url.empty()) out += "live 3D view: " + view_url + "\n";
-  std::snprintf(line, sizeof line, "%-10s %-18s %4s %9s %9s %9s  %7s  %s\n", "joint", "parent -> child", "axes", "1st",
-                "2nd", "3rd", "samples", "flags");
+  std::snprintf(line, sizeof line, "%-10s %-38s %-38s %-38s %9s %7s  %-9s %s\n", "joint", "anatomical angle 1",
+                "angle 2", "angle 3", "err truth", "samples", "mounting", "flags");
   out += line;
   for (const auto& name : joint_order) {
     auto it = view.joints.find(name);
-    if (it == view.joints.end()) {
+    if (it == view.joints.end() || it->second.count == 0) {
       std::snprintf(line, sizeof line, "%-10s (waiting for data)\n", name.c_str());
+    } else if (const auto& j = it->second.latest;
+               it->second.latest_finite && !j.anatomy().empty() && j.anatomical_names().size() == 3) {
+      // Named ISB angles; the error is the largest of the three against the simulator's truth at the same instant.
+      std::string cells;
+      for (std::size_t i = 0; i < 3; ++i) {
+        char cell[64];
+        std::snprintf(cell, sizeof cell, "%-29s %8.2f ", logging::printable(j.anatomical_names()[i], 28).c_str(),
+                      j.anatomical()[i] * kDeg);
+        cells += cell;
+      }
+      char error[16] = "-";
+      if (it->second.errors > 0) std::snprintf(error, sizeof error, "%.2f", it->second.recent_error_deg);
+      std::string flags = format_flags(j.flags());
+      if (it->second.non_finite) flags += " non-finite=" + std::to_string(it->second.non_finite);
+      if (it->second.writers > 1) flags += " WRITERS=" + std::to_string(it->second.writers);
+      std::snprintf(line, sizeof line, "%-10s %s%9s %7llu  %-9s %s\n", name.c_str(), cells.c_str(), error,
+                    static_cast<unsigned long long>(it->second.count),
+                    (j.flags() & bsn::FLAG_SEGMENT_FRAME) ? "aligned" : "default", flags.c_str());
     } else {
-      const auto& j = it->second.latest;
       // Names from the network are escaped: a writer on the domain cannot drive this terminal.
       const std::string pc = logging::printable(j.parent(), 24) + " -> " + logging::printable(j.child(), 24);
       std::string flags = format_flags(j.flags());
@@ -191,14 +288,11 @@ int run_demo(const DemoOptions& opt) {
     dds::Participant participant({opt.domain, "bsn demo"});
     auto joint_reader = participant.make_reader(
         dds::kJointAnglesTopic, [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo& info) {
-          std::lock_guard lock(view.mutex);
-          auto& v = view.joints[j.joint()];
-          v.writers = view.key_writers.note(j.joint(), info.sample_identity.writer_guid(), dds::monotonic_ns());
-          v.latest = j;
-          v.latest_finite = dds::finite_values(j);
-          v.non_finite += v.latest_finite ? 0 : 1;
-          ++v.count;
+          on_estimate(view, j, info);
         });
+    auto truth_reader = participant.make_reader(
+        dds::kTruthJointAnglesTopic,
+        [&view](const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo&) { on_truth(view, j); });
     auto status_reader = participant.make_reader(
         dds::kStatusTopic, [&view](const bsn::Status& s, const eprosima::fastdds::dds::SampleInfo&) {
           std::lock_guard lock(view.mutex);
@@ -212,11 +306,22 @@ int run_demo(const DemoOptions& opt) {
       fusion_process = std::make_unique<dds::ChildProcess>(
           std::vector<std::string>{self, "fusion", "--domain", domain, "--body", body_file},
           (dir / "fusion.log").string());
+      // The default body walks: every node publishes its segment of one scenario from one common start, so the
+      // body moves as one. A body file of the user's (or --random) gives each node its own random motion.
+      const bool walking = opt.body_path.empty() && !opt.random;
+      const std::string scenario_file = (dir / "walk.yaml").string();
+      if (walking)
+        std::ofstream(scenario_file) << walking_scenario(opt.rate_hz,
+                                                         opt.duration_s > 0.0 ? opt.duration_s + 60.0 : 1e7);
+      const std::string start_at = std::to_string(std::time(nullptr) + 2);
       for (const auto& s : body.segments) {
-        sims.push_back(std::make_unique<dds::ChildProcess>(
-            std::vector<std::string>{self, "sim", "--domain", domain, "--node", s.node, "--segment", s.name, "--rate",
-                                     std::to_string(opt.rate_hz)},
-            (dir / ("sim-" + s.node + ".log")).string()));
+        std::vector<std::string> args{self, "sim", "--domain", domain, "--node", s.node, "--segment", s.name};
+        if (walking) {
+          args.insert(args.end(), {"--scenario", scenario_file, "--start-at", start_at});
+        } else {
+          args.insert(args.end(), {"--rate", std::to_string(opt.rate_hz)});
+        }
+        sims.push_back(std::make_unique<dds::ChildProcess>(args, (dir / ("sim-" + s.node + ".log")).string()));
       }
     } catch (const std::exception& e) {
       logging::log_error("cannot start the demo processes: ", e.what());
@@ -291,6 +396,18 @@ int run_demo(const DemoOptions& opt) {
   }
   std::printf("bsn demo: %llu joint-angle samples from %zu of %zu joints\n", static_cast<unsigned long long>(total),
               joints_seen, joint_order.size());
+  // Per joint with anatomical angles: the first angle's range (2nd to 98th percentile: a joint's sample pairs the
+  // child's newest orientation with the parent's latest, which under load can be a few samples old, so single
+  // extremes say more about the delivery than about the motion) and the error against the simulator's truth.
+  for (const auto& name : joint_order) {
+    const auto it = view.joints.find(name);
+    if (it == view.joints.end() || it->second.errors == 0 || it->second.latest.anatomical_names().empty()) continue;
+    const JointView& v = it->second;
+    std::printf("bsn demo: %s %s %.1f .. %.1f deg, error against the truth %.2f deg rms over %llu samples\n",
+                name.c_str(), logging::printable(v.latest.anatomical_names()[0], 32).c_str(), v.percentile(0.02),
+                v.percentile(0.98), std::sqrt(v.error_sq_sum / static_cast<double>(v.errors)),
+                static_cast<unsigned long long>(v.errors));
+  }
   if (joints_seen < joint_order.size() && exit_code == 0) {
     logging::log_error("some joints never produced angles; logs kept in ", dir.string());
     exit_code = 1;
@@ -325,6 +442,8 @@ Command demo_command() {
             ->capture_default_str()
             ->check(number_in(0, 65535));
         cmd->add_option("--view-bind", opt->view_bind, "with --view: the address it listens on")->capture_default_str();
+        cmd->add_flag("--random", opt->random,
+                      "every node on its own random motion instead of the walking body (always with --body)");
         add_domain_option(cmd, opt->domain);
         return
             [opt] { return opt->calibrate ? run_calibration_demo(5.0, opt->duration_s, opt->domain) : run_demo(*opt); };

@@ -2,6 +2,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <map>
 #include <mutex>
 #include <set>
 #include <string>
@@ -34,18 +35,20 @@ struct Printer {
   const EchoOptions& opt;
   std::mutex mutex;
   std::atomic<long> printed{0};
-  Clock::time_point last_print{};
+  /// Per sample key (joint, segment, node, ...): --rate limits each key on its own, so every joint of a body shows
+  /// at the rate asked for, not a share of it.
+  std::map<std::string, Clock::time_point> last_print;
 
-  /// Prints `line`; `header` (if any) goes before the first line printed.
-  void print(const std::string& line, const std::string& header = "") {
+  /// Prints `line` of the sample with DDS key `key`; `header` (if any) goes before the first line printed.
+  void print(const std::string& line, const std::string& key, const std::string& header = "") {
     std::lock_guard lock(mutex);
     if (opt.count > 0 && printed.load() >= opt.count) return;
     const auto now = Clock::now();
-    if (opt.rate_hz > 0.0 && printed.load() > 0 &&
-        now - last_print < std::chrono::duration<double>(1.0 / opt.rate_hz)) {
-      return;
+    if (opt.rate_hz > 0.0) {
+      const auto [last, first] = last_print.try_emplace(key, now);
+      if (!first && now - last->second < std::chrono::duration<double>(1.0 / opt.rate_hz)) return;
+      last->second = now;
     }
-    last_print = now;
     if (printed.load() == 0 && !header.empty()) {
       std::fputs(header.c_str(), stdout);
       std::fputc('\n', stdout);
@@ -160,14 +163,15 @@ int run_echo(const EchoOptions& opt) {
             const std::size_t writers = watch.note(key_name(s), info, finite);
             if (opt.format == "text") {
               printer.print((finite ? format_line(s, name) : non_finite_line(s, name)) +
-                            (writers > 1 ? " writers=" + std::to_string(writers) : ""));
+                                (writers > 1 ? " writers=" + std::to_string(writers) : ""),
+                            key_of(s));
             } else if (finite) {  // a machine format has no place for a flag: such samples are counted instead
-              printer.print(machine_line(s, name, opt.format), csv_header_of(s, opt.format));
+              printer.print(machine_line(s, name, opt.format), key_of(s), csv_header_of(s, opt.format));
             }
           } else if (opt.format == "text") {
-            printer.print(format_line(s, name));
+            printer.print(format_line(s, name), key_of(s));
           } else {
-            printer.print(machine_line(s, name, opt.format), csv_header_of(s, opt.format));
+            printer.print(machine_line(s, name, opt.format), key_of(s), csv_header_of(s, opt.format));
           }
         });
   });
@@ -199,20 +203,22 @@ int run_echo(const EchoOptions& opt) {
 }  // namespace
 
 Command echo_command() {
-  return {
-      "echo", "Print a bsn topic live, one line per sample, in degrees", [](CLI::App* cmd) {
-        auto opt = std::make_shared<EchoOptions>();
-        cmd->add_option("topic", opt->topic, "one of: " + topic_list())->required();
-        cmd->add_option("--count", opt->count, "exit after N samples")->check(non_negative_number());
-        cmd->add_option("--rate", opt->rate_hz, "print at most HZ samples per second")->check(non_negative_number(1e6));
-        cmd->add_option("--timeout", opt->timeout_s, "exit 1 if --count samples have not arrived within S seconds")
-            ->check(non_negative_number(1e9));
-        cmd->add_option("--format", opt->format, "text (human units), csv (SI, header first) or json (one per line)")
-            ->check(CLI::IsMember({"text", "csv", "json"}))
-            ->capture_default_str();
-        add_domain_option(cmd, opt->domain);
-        return [opt] { return run_echo(*opt); };
-      }};
+  return {"echo", "Print a bsn topic live, one line per sample, in degrees", [](CLI::App* cmd) {
+            auto opt = std::make_shared<EchoOptions>();
+            cmd->add_option("topic", opt->topic, "one of: " + topic_list())->required();
+            cmd->add_option("--count", opt->count, "exit after N samples")->check(non_negative_number());
+            cmd->add_option("--rate", opt->rate_hz,
+                            "print at most HZ samples per second of each key (joint, segment, node)")
+                ->check(non_negative_number(1e6));
+            cmd->add_option("--timeout", opt->timeout_s, "exit 1 if --count samples have not arrived within S seconds")
+                ->check(non_negative_number(1e9));
+            cmd->add_option("--format", opt->format,
+                            "text (human units), csv (SI, header first) or json (one per line)")
+                ->check(CLI::IsMember({"text", "csv", "json"}))
+                ->capture_default_str();
+            add_domain_option(cmd, opt->domain);
+            return [opt] { return run_echo(*opt); };
+          }};
 }
 
 }  // namespace bsn::services

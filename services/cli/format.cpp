@@ -49,6 +49,7 @@ std::string format_flags(std::uint32_t f) {
   add(bsn::FLAG_STALE, "stale");
   add(bsn::FLAG_INITIALISING, "initialising");
   add(bsn::FLAG_REINITIALISED, "reinitialised");
+  add(bsn::FLAG_SEGMENT_FRAME, "segment_frame");
   return out.empty() ? "-" : out;
 }
 
@@ -73,9 +74,17 @@ std::string format_sample(const bsn::Orientation& s, const char* prefix) {
 
 std::string format_sample(const bsn::JointAngles& s) {
   const auto& a = s.angles();
-  return "joint " + text(s.joint()) + " (" + text(s.parent()) + " -> " + text(s.child()) + ")" +
-         printf_string(" t=%.6fs %s=[%8.2f %8.2f %8.2f] deg", seconds(s.timestamp_ns()), text(s.axes()).c_str(),
-                       a[0] * kDeg, a[1] * kDeg, a[2] * kDeg) +
+  std::string out = "joint " + text(s.joint()) + " (" + text(s.parent()) + " -> " + text(s.child()) + ")" +
+                    printf_string(" t=%.6fs", seconds(s.timestamp_ns()));
+  // The named anatomical angles first: what a gait lab reads; the axis-sequence angles after them.
+  if (!s.anatomy().empty() && s.anatomical_names().size() == 3) {
+    out += " " + text(s.anatomy()) + (s.side().empty() ? "" : " " + text(s.side()));
+    for (std::size_t i = 0; i < 3; ++i)
+      out += " " + text(s.anatomical_names()[i]) + printf_string("=%.2f", s.anatomical()[i] * kDeg);
+    out += " deg;";
+  }
+  return out +
+         printf_string(" %s=[%8.2f %8.2f %8.2f] deg", text(s.axes()).c_str(), a[0] * kDeg, a[1] * kDeg, a[2] * kDeg) +
          " flags=" + format_flags(s.flags());
 }
 

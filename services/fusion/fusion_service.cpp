@@ -176,7 +176,7 @@ void FusionService::publish_orientation(const fusion::SampleResult& r, std::uint
   o.timestamp_ns(timestamp_ns);
   dds::fill_orientation(r.orientation, o);
   o.gyro_bias({r.gyro_bias.x(), r.gyro_bias.y(), r.gyro_bias.z()});
-  o.flags(to_wire_flags(r.flags));
+  o.flags(to_wire_flags(r.flags) | (r.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u));
   if (!orientation_writer_->write(o)) ++write_failures_;
 }
 
@@ -190,7 +190,9 @@ void FusionService::publish_joint(const fusion::JointEstimate& joint, std::uint6
   j.quat(dds::to_wxyz(joint.relative));
   j.axes(child.joint_axes.name());
   j.angles({joint.angles.x(), joint.angles.y(), joint.angles.z()});
-  j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u));
+  j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u) |
+          (joint.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u));
+  dds::fill_anatomical(joint.convention, joint.anatomical, j);
   if (!joint_writer_->write(j)) ++write_failures_;
 }
 

@@ -43,6 +43,15 @@ void visit_fields(const bsn::JointAngles& s, FieldVisitor& v) {
   v.text("axes", s.axes());
   v.f64("angles", "rad", s.angles().data(), 3);
   v.u32("flags", "bits", s.flags());
+  v.text("anatomy", s.anatomy());
+  v.text("side", s.side());
+  // Each named angle as its name and its value: fixed columns whatever the joint.
+  static constexpr const char* kNames[3] = {"anatomical_name_0", "anatomical_name_1", "anatomical_name_2"};
+  static constexpr const char* kValues[3] = {"anatomical_0", "anatomical_1", "anatomical_2"};
+  for (std::size_t i = 0; i < 3; ++i) {
+    v.text(kNames[i], i < s.anatomical_names().size() ? s.anatomical_names()[i] : std::string());
+    scalar(v, kValues[i], "rad", s.anatomical()[i]);
+  }
 }
 
 void visit_fields(const bsn::Status& s, FieldVisitor& v) {

@@ -3,6 +3,8 @@
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
+#include <array>
+#include <cmath>
 #include <fstream>
 #include <initializer_list>
 #include <map>
@@ -60,6 +62,52 @@ class Parser : public config::YamlReader<ConfigError> {
     return spec;
   }
 
+  // `anatomy: knee`, `side: left`: the joint's anatomical convention, when its name does not imply it.
+  fusion::JointConvention anatomy(const YAML::Node& s, const std::string& joint) const {
+    fusion::JointConvention c = fusion::infer_joint_convention(joint);
+    if (const YAML::Node a = s["anatomy"]) {
+      const std::string name = text(a, "anatomy");
+      const auto type = fusion::parse_joint_type(name);
+      if (!type)
+        fail(a, "anatomy '" + name + "' is not one of hip, knee, ankle, trunk_pelvis, shoulder, elbow, wrist, none");
+      c.type = *type;
+    }
+    if (const YAML::Node sd = s["side"]) {
+      const std::string name = text(sd, "side");
+      const auto side = fusion::parse_body_side(name);
+      if (!side) fail(sd, "side '" + name + "' is not one of left, right, midline");
+      c.side = *side;
+    }
+    return c;
+  }
+
+  // `sensor_axes: [anterior, left, up]`: where the sensor's x, y, z point in the standing pose; or
+  // `sensor_to_segment: [w, x, y, z]`, the rotation itself (as an alignment writes it).
+  fusion::Quat mounting(const YAML::Node& s) const {
+    if (s["sensor_axes"] && s["sensor_to_segment"]) fail(s, "give either sensor_axes or sensor_to_segment, not both");
+    if (const YAML::Node a = s["sensor_axes"]) {
+      if (!a.IsSequence() || a.size() != 3)
+        fail(a, "sensor_axes must be a list of three directions (of the sensor's x, y, z), e.g. [anterior, left, up]");
+      std::array<fusion::Direction, 3> dirs{};
+      for (std::size_t i = 0; i < 3; ++i) {
+        const std::string name = text(a[i], "a sensor axis direction");
+        const auto d = fusion::parse_direction(name);
+        if (!d)
+          fail(a[i], "sensor axis direction '" + name +
+                         "' is not one of anterior, posterior, superior (up), inferior (down), left, right");
+        dirs[i] = *d;
+      }
+      const auto q = fusion::sensor_to_segment_from_axes(dirs);
+      if (!q) fail(a, "sensor_axes must be three perpendicular directions of a right-handed frame (x cross y = z)");
+      return *q;
+    }
+    const YAML::Node q = s["sensor_to_segment"];
+    if (!q.IsSequence() || q.size() != 4) fail(q, "sensor_to_segment must be a quaternion [w, x, y, z]");
+    const fusion::Quat r(number(q[0], "w"), number(q[1], "x"), number(q[2], "y"), number(q[3], "z"));
+    if (!(std::abs(r.norm() - 1.0) < 1e-3)) fail(q, "sensor_to_segment must be a unit quaternion [w, x, y, z]");
+    return r.normalized();
+  }
+
   // `calibration: FILE` (relative to the body file): loaded here only to report a bad file at its line; the
   // fusion service reads it again with load_body_calibrations().
   void check_calibration(const YAML::Node& n) const {
@@ -93,7 +141,10 @@ class Parser : public config::YamlReader<ConfigError> {
     std::vector<int> lines;
     for (const YAML::Node& s : segs) {
       require_map(s, "a segment");
-      check_keys(s, {"name", "node", "parent", "joint", "joint_axes", "filter", "calibration"}, "segment");
+      check_keys(s,
+                 {"name", "node", "parent", "joint", "joint_axes", "anatomy", "side", "sensor_axes",
+                  "sensor_to_segment", "filter", "calibration"},
+                 "segment");
       SegmentSpec spec;
       if (!s["name"]) fail(s, "segment without 'name'");
       spec.name = text(s["name"], "name");
@@ -102,6 +153,8 @@ class Parser : public config::YamlReader<ConfigError> {
       if (s["joint"]) spec.joint = text(s["joint"], "joint");
       spec.joint_axes = s["joint_axes"] ? axes(s["joint_axes"]) : default_axes;
       spec.filter = s["filter"] ? filter(s["filter"], default_filter) : default_filter;
+      if (s["anatomy"] || s["side"]) spec.anatomy = anatomy(s, fusion::joint_name(spec));
+      if (s["sensor_axes"] || s["sensor_to_segment"]) spec.sensor_to_segment = mounting(s);
       if (s["calibration"]) check_calibration(s["calibration"]);
       model.segments.push_back(std::move(spec));
       lines.push_back(s.Mark().line + 1);
@@ -193,6 +246,17 @@ std::string body_model_to_yaml(const BodyModel& body) {
       out << YAML::Key << "parent" << YAML::Value << s.parent;
       out << YAML::Key << "joint" << YAML::Value << fusion::joint_name(s);
       out << YAML::Key << "joint_axes" << YAML::Value << s.joint_axes.name();
+      const fusion::JointConvention c = fusion::joint_convention(s);
+      if (c.type != fusion::JointType::kNone) {
+        out << YAML::Key << "anatomy" << YAML::Value << std::string(fusion::joint_type_name(c.type));
+        if (c.side != fusion::BodySide::kMidline)
+          out << YAML::Key << "side" << YAML::Value << std::string(fusion::body_side_name(c.side));
+      }
+    }
+    if (s.sensor_to_segment) {
+      const fusion::Quat& q = *s.sensor_to_segment;
+      out << YAML::Key << "sensor_to_segment" << YAML::Value << YAML::Flow << YAML::BeginSeq << q.w() << q.x() << q.y()
+          << q.z() << YAML::EndSeq;
     }
     out << YAML::Key << "filter" << YAML::Value << YAML::Flow << YAML::BeginMap;
     out << YAML::Key << "name" << YAML::Value << s.filter.name;

@@ -48,4 +48,18 @@ std::uint64_t monotonic_ns() {
   return static_cast<std::uint64_t>(ts.tv_sec) * 1000000000ull + static_cast<std::uint64_t>(ts.tv_nsec);
 }
 
+void fill_anatomical(const fusion::JointConvention& convention, const fusion::Vec3& angles, bsn::JointAngles& out) {
+  out.anatomy().assign(fusion::joint_type_name(convention.type));
+  out.side().assign(fusion::body_side_name(convention.side));
+  auto& names = out.anatomical_names();
+  if (convention.type == fusion::JointType::kNone) {
+    names.clear();
+  } else {
+    const auto wanted = fusion::anatomical_angle_names(convention.type);
+    names.resize(3);
+    for (std::size_t i = 0; i < 3; ++i) names[i].assign(wanted[i]);
+  }
+  out.anatomical({angles.x(), angles.y(), angles.z()});
+}
+
 }  // namespace bsn::dds

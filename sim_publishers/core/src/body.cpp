@@ -4,6 +4,7 @@
 #include <numbers>
 #include <random>
 #include <stdexcept>
+#include <tuple>
 
 namespace bsn::sim {
 namespace {
@@ -25,6 +26,26 @@ void add_pose(SegmentDef& root, const Pose& pose) {
   root.rotation.push_back(constant_step(Vec3::UnitY(), pose.orientation.pitch));
   root.rotation.push_back(constant_step(Vec3::UnitX(), pose.orientation.roll));
   for (int i = 0; i < 3; ++i) root.translation[i] = Signal::constant_value(pose.position_m[i]);
+}
+
+// The alignment moves of one leg (side 0 = left, first), a few times: the hip flexes and the knee follows a little
+// later, the toes come up and down while the knee bends, then all return. As a person does it, the three joints
+// do not move in proportion, which is what lets the functional fit tell their axes apart.
+void add_alignment_moves(const AlignmentMoves& m, int side, SegmentDef& thigh, SegmentDef& shank, SegmentDef& foot) {
+  const double f = m.flexion_s;
+  for (int k = 0; k < m.flexions_per_leg; ++k) {
+    const double t = m.pose_s + (side * m.flexions_per_leg + k) * f;
+    // (segment, amplitude, up at, up for, down at, down for), times as shares of one flexion.
+    const std::array<std::tuple<SegmentDef*, double, double, double, double, double>, 3> moves{{
+        {&thigh, m.hip_flexion_rad, 0.0, 0.4, 0.5, 0.4},
+        {&shank, m.knee_flexion_rad, 0.1, 0.25, 0.6, 0.35},
+        {&foot, m.ankle_flexion_rad, 0.05, 0.2, 0.3, 0.2},
+    }};
+    for (const auto& [seg, amplitude, up_at, up_for, down_at, down_for] : moves) {
+      seg->rotation[0].angle.steps.push_back({amplitude, t + up_at * f, up_for * f});
+      seg->rotation[0].angle.steps.push_back({-amplitude, t + down_at * f, down_for * f});
+    }
+  }
 }
 
 }  // namespace
@@ -243,7 +264,8 @@ Body lower_body(const std::optional<Gait>& gait, const Pose& pose) {
   pelvis.rotation[1].angle.harmonics = {hz(2.0, 2.0, 0.0)};        // anterior tilt
   pelvis.rotation[2].angle.harmonics = {hz(3.0, 1.0, 0.5 * kPi)};  // obliquity
   pelvis.sensor_offset = Vec3(-0.10, 0.0, 0.0);                    // on the sacrum
-  if (gait) {
+  const AlignmentMoves* moves = gait && gait->alignment ? &*gait->alignment : nullptr;
+  if (gait && !moves) {
     const double c = std::cos(gait->heading_rad), s = std::sin(gait->heading_rad);
     pelvis.translation[0].rate = gait->speed_m_s * c;
     pelvis.translation[1].rate = gait->speed_m_s * s;
@@ -265,20 +287,38 @@ Body lower_body(const std::optional<Gait>& gait, const Pose& pose) {
     thigh.rotation = {harmonic_step(flex_axis, g * 10.0 * kDeg, {hz(22.0, 1.0, ph + 0.5 * kPi), hz(2.0, 2.0, 2 * ph)}),
                       harmonic_step(Vec3::UnitX(), 0.0, {hz(lr * 3.0, 1.0, ph)})};
     thigh.sensor_offset = Vec3(0.0, lr * 0.08, -0.20);
+    thigh.joint = "hip" + suffix;
     shank.name = "shank" + suffix;
     shank.parent = static_cast<int>(segs.size());
     shank.joint_offset = Vec3(0.0, 0.0, -0.42);
     shank.rotation = {
         harmonic_step(Vec3::UnitY(), g * 28.0 * kDeg, {hz(8.0, 1.0, ph), hz(22.0, 2.0, 2 * ph - 0.5 * kPi + 0.6)})};
     shank.sensor_offset = Vec3(0.0, lr * 0.05, -0.20);
+    shank.joint = "knee" + suffix;
     foot.name = "foot" + suffix;
     foot.parent = shank.parent + 1;
     foot.joint_offset = Vec3(0.0, 0.0, -0.41);
     foot.rotation = {harmonic_step(flex_axis, g * 2.0 * kDeg, {hz(5.0, 1.0, ph + 0.5 * kPi), hz(8.0, 2.0, 2 * ph)})};
     foot.sensor_offset = Vec3(0.08, 0.0, 0.03);
+    foot.joint = "ankle" + suffix;
+    if (moves) add_alignment_moves(*moves, side, thigh, shank, foot);
     segs.push_back(thigh);
     segs.push_back(shank);
     segs.push_back(foot);
+  }
+  if (moves) {
+    // Walking starts after the alignment moves: the gait's harmonics fade in, its mean angles step in.
+    const double start = moves->walk_start_s();
+    for (SegmentDef& seg : segs) {
+      for (RevoluteStep& step : seg.rotation) {
+        if (step.angle.harmonics.empty()) continue;
+        step.angle.envelope = {Window{start, 1e12, 1.0}};
+        if (&seg != &segs[0] && step.angle.constant != 0.0) {
+          step.angle.steps.push_back({step.angle.constant, start, 1.0});
+          step.angle.constant = 0.0;
+        }
+      }
+    }
   }
   return Body(std::move(segs));
 }
@@ -306,17 +346,20 @@ Body upper_body(const std::optional<Reaching>& reaching, const Pose& pose) {
     upper.rotation = {harmonic_step(flex_axis, 0.5 * amp, {{0.5 * amp, f, ph - 0.5 * kPi}}),
                       harmonic_step(Vec3::UnitX(), lr * 8.0 * kDeg, {{lr * 0.1 * amp, f, ph}})};
     upper.sensor_offset = Vec3(0.0, lr * 0.05, -0.15);
+    upper.joint = "shoulder" + suffix;
     fore.name = "forearm" + suffix;
     fore.parent = static_cast<int>(segs.size());
     fore.joint_offset = Vec3(0.0, 0.0, -0.30);
     // Elbow flexed 70 deg at rest, extending to 20 deg at full reach.
     fore.rotation = {harmonic_step(flex_axis, 45.0 * kDeg, {{reaching ? 25.0 * kDeg : 0.0, f, ph + 0.5 * kPi}})};
     fore.sensor_offset = Vec3(0.0, lr * 0.03, -0.20);
+    fore.joint = "elbow" + suffix;
     hand.name = "hand" + suffix;
     hand.parent = fore.parent + 1;
     hand.joint_offset = Vec3(0.0, 0.0, -0.26);
     hand.rotation = {harmonic_step(Vec3::UnitZ(), 0.0, {{reaching ? 15.0 * kDeg : 0.0, f, ph}})};
     hand.sensor_offset = Vec3(0.0, 0.0, -0.06);
+    hand.joint = "wrist" + suffix;
     segs.push_back(upper);
     segs.push_back(fore);
     segs.push_back(hand);

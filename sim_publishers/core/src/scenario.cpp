@@ -3,20 +3,52 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <stdexcept>
 
 namespace bsn::sim {
 
+namespace {
+
+// Each segment's sensor rotated and displaced by its own random stream.
+void mount_sensors(const Mounting& m, std::uint64_t seed, Body& body) {
+  const double max_rotation = std::clamp(m.max_rotation_deg, 0.0, 180.0) * std::numbers::pi / 180.0;
+  for (std::size_t i = 0; i < body.size(); ++i) {
+    std::mt19937_64 rng(mix_seed(seed, 5000 + i));
+    std::normal_distribution<double> normal(0.0, 1.0);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    Quat r;
+    if (max_rotation >= std::numbers::pi) {
+      // Four normal deviates, normalised: uniform on the rotations.
+      r = Quat(normal(rng), normal(rng), normal(rng), normal(rng)).normalized();
+    } else {
+      const Vec3 axis = Vec3(normal(rng), normal(rng), normal(rng)).normalized();
+      r = Quat(Eigen::AngleAxisd(unit(rng) * max_rotation, axis));
+    }
+    const Vec3 direction = Vec3(normal(rng), normal(rng), normal(rng)).normalized();
+    SegmentDef& def = body.segment(i);
+    def.sensor_to_segment = (def.sensor_to_segment * r).normalized();
+    def.sensor_offset += direction * (unit(rng) * std::max(0.0, m.max_offset_m));
+  }
+}
+
+}  // namespace
+
 Body build_body(const ScenarioSpec& spec) {
+  Body body;
   switch (spec.body) {
     case BodyKind::kLowerBody:
-      return lower_body(spec.gait, spec.pose);
-    case BodyKind::kUpperBody:
-      return upper_body(spec.reaching, spec.pose);
-    case BodyKind::kFree:
+      body = lower_body(spec.gait, spec.pose);
       break;
+    case BodyKind::kUpperBody:
+      body = upper_body(spec.reaching, spec.pose);
+      break;
+    case BodyKind::kFree:
+      return free_body(spec.free_motion, spec.free_body_name);
   }
-  return free_body(spec.free_motion, spec.free_body_name);
+  if (spec.mounting.max_rotation_deg > 0.0 || spec.mounting.max_offset_m > 0.0)
+    mount_sensors(spec.mounting, spec.seed, body);
+  return body;
 }
 
 ScenarioSpec swing_scenario(const std::string& segment, std::uint64_t seed, double rate_hz, double duration_s) {
@@ -58,6 +90,8 @@ ScenarioRunner::ScenarioRunner(const ScenarioSpec& spec, const std::vector<std::
   }
   for (std::size_t i : selected_) {
     names_.push_back(body_.segment(i).name);
+    joints_.push_back(body_.segment(i).parent >= 0 ? fusion::infer_joint_convention(body_.segment(i).joint)
+                                                   : fusion::JointConvention{});
     // Streams depend on the segment's index in the body, not on which segments were selected.
     sensors_.emplace_back(spec_.sensors, spec_.rate_hz, mix_seed(spec_.seed, 2 * i));
     timing_rng_.emplace_back(mix_seed(spec_.seed, 2 * i + 1));
@@ -107,6 +141,13 @@ bool ScenarioRunner::next(std::vector<ScenarioSample>& out) {
     o.truth = s.q_sensor;
     o.dropped = dropped;
     o.movement = spec_.movement.empty() || inside_any(spec_.movement, t);
+    o.joint = joints_[j];
+    if (const int parent = body_.segment(i).parent; parent >= 0) {
+      // The parent's state is of the same instant: evaluate() and evaluate_chain() both computed it.
+      o.joint_relative = fusion::canonical(fusion::relative_orientation(
+          anatomical_orientation(states_[static_cast<std::size_t>(parent)]), anatomical_orientation(s)));
+      o.joint_anatomical = fusion::anatomical_angles(*o.joint_relative, o.joint);
+    }
   }
   ++k_;
   return true;

@@ -181,8 +181,9 @@ class Parser : public config::YamlReader<ScenarioError> {
   }
 
   void body(const YAML::Node& n, ScenarioSpec& spec) const {
-    check_keys(n, {"kind", "segment", "pose", "random", "rotations", "moves", "pose_sequence", "gait", "reaching"},
-               "body");
+    check_keys(
+        n, {"kind", "segment", "pose", "random", "rotations", "moves", "pose_sequence", "gait", "reaching", "mounting"},
+        "body");
     const std::string kind = n["kind"] ? text(n["kind"], "body kind") : "free";
     if (kind == "free")
       spec.body = BodyKind::kFree;
@@ -199,6 +200,8 @@ class Parser : public config::YamlReader<ScenarioError> {
       only(key, BodyKind::kFree, "free");
     only("gait", BodyKind::kLowerBody, "lower_body");
     only("reaching", BodyKind::kUpperBody, "upper_body");
+    if (n["mounting"] && spec.body == BodyKind::kFree)
+      fail(n["mounting"], "'mounting' needs body kind lower_body or upper_body");
     if (n["segment"]) spec.free_body_name = text(n["segment"], "segment");
     if (n["pose"]) {
       spec.pose = pose(n["pose"]);
@@ -238,12 +241,35 @@ class Parser : public config::YamlReader<ScenarioError> {
                                ps["start_s"] ? non_negative(ps["start_s"], "start_s") : 0.0, mix_seed(spec.seed, 1001));
       spec.free_motion.rotations.insert(spec.free_motion.rotations.end(), seq.begin(), seq.end());
     }
+    if (const YAML::Node m = n["mounting"]) {
+      check_keys(m, {"max_rotation_deg", "max_offset_m"}, "body.mounting");
+      if (m["max_rotation_deg"]) {
+        spec.mounting.max_rotation_deg = non_negative(m["max_rotation_deg"], "max_rotation_deg");
+        if (spec.mounting.max_rotation_deg > 180.0) fail(m["max_rotation_deg"], "max_rotation_deg must be 0..180");
+      }
+      if (m["max_offset_m"]) {
+        spec.mounting.max_offset_m = non_negative(m["max_offset_m"], "max_offset_m");
+        if (spec.mounting.max_offset_m > 0.2) fail(m["max_offset_m"], "max_offset_m must be 0..0.2");
+      }
+    }
     if (const YAML::Node g = n["gait"]) {
-      check_keys(g, {"cadence_steps_per_min", "speed_m_s", "heading_deg"}, "body.gait");
+      check_keys(g, {"cadence_steps_per_min", "speed_m_s", "heading_deg", "alignment"}, "body.gait");
       Gait gait;
       if (g["cadence_steps_per_min"]) gait.cadence_steps_per_min = positive(g["cadence_steps_per_min"], "cadence");
       if (g["speed_m_s"]) gait.speed_m_s = non_negative(g["speed_m_s"], "speed_m_s");
       if (g["heading_deg"]) gait.heading_rad = number(g["heading_deg"], "heading_deg") * kDeg;
+      if (const YAML::Node a = g["alignment"]) {
+        check_keys(a, {"pose_s", "flexions_per_leg", "flexion_s"}, "body.gait.alignment");
+        AlignmentMoves moves;
+        if (a["pose_s"]) moves.pose_s = positive(a["pose_s"], "pose_s");
+        if (a["flexion_s"]) moves.flexion_s = positive(a["flexion_s"], "flexion_s");
+        if (a["flexions_per_leg"]) {
+          const double count = positive(a["flexions_per_leg"], "flexions_per_leg");
+          if (count != std::floor(count) || count > 20) fail(a["flexions_per_leg"], "flexions_per_leg must be 1..20");
+          moves.flexions_per_leg = static_cast<int>(count);
+        }
+        gait.alignment = moves;
+      }
       spec.gait = gait;
     }
     if (const YAML::Node r = n["reaching"]) {

@@ -70,6 +70,58 @@ TEST(BodyModel, RoundTripsThroughYaml) {
   }
 }
 
+TEST(BodyModel, AnatomyAndMountingFromTheFile) {
+  const auto body = parse_body_model(R"(segments:
+  - name: thigh
+  - name: shank
+    parent: thigh
+    joint: j2
+    anatomy: knee
+    side: left
+    sensor_axes: [up, anterior, left]
+  - name: foot
+    parent: shank
+    joint: ankle_r
+    sensor_to_segment: [1, 0, 0, 0]
+)",
+                                     "body.yaml");
+  ASSERT_EQ(body.segments.size(), 3u);
+  EXPECT_EQ(fusion::joint_convention(body.segments[1]),
+            (fusion::JointConvention{fusion::JointType::kKnee, fusion::BodySide::kLeft}));
+  // Inferred from the joint's name when the file does not say.
+  EXPECT_EQ(fusion::joint_convention(body.segments[2]),
+            (fusion::JointConvention{fusion::JointType::kAnkle, fusion::BodySide::kRight}));
+  EXPECT_FALSE(body.segments[0].sensor_to_segment);
+  ASSERT_TRUE(body.segments[1].sensor_to_segment);
+  // Sensor x points up: it is the segment's Y (superior); sensor z points left: the segment's -Z.
+  const fusion::Quat& m = *body.segments[1].sensor_to_segment;
+  EXPECT_LT((m * fusion::Vec3::UnitX() - fusion::Vec3::UnitY()).norm(), 1e-12);
+  EXPECT_LT((m * fusion::Vec3::UnitZ() + fusion::Vec3::UnitZ()).norm(), 1e-12);
+  ASSERT_TRUE(body.segments[2].sensor_to_segment);
+  EXPECT_LT(fusion::angle_between(*body.segments[2].sensor_to_segment, fusion::Quat::Identity()), 1e-12);
+  // Printed and read again, the model keeps its anatomy and mountings.
+  const auto again = parse_body_model(config::body_model_to_yaml(body), "generated");
+  EXPECT_EQ(fusion::joint_convention(again.segments[1]), fusion::joint_convention(body.segments[1]));
+  ASSERT_TRUE(again.segments[1].sensor_to_segment);
+  EXPECT_LT(fusion::angle_between(*again.segments[1].sensor_to_segment, m), 1e-9);
+}
+
+TEST(BodyModel, BadAnatomyAndMountingNameTheirLine) {
+  const std::string head = "segments:\n  - name: a\n  - name: b\n    parent: a\n";
+  std::string e = error_of(head + "    anatomy: neck\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("anatomy 'neck'"), std::string::npos) << e;
+  e = error_of(head + "    side: up\n");
+  EXPECT_NE(e.find("side 'up'"), std::string::npos) << e;
+  e = error_of(head + "    sensor_axes: [anterior, right, up]\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("right-handed"), std::string::npos) << e;
+  e = error_of(head + "    sensor_axes: [anterior, sideways, up]\n");
+  EXPECT_NE(e.find("'sideways'"), std::string::npos) << e;
+  e = error_of(head + "    sensor_to_segment: [2, 0, 0, 0]\n");
+  EXPECT_NE(e.find("unit quaternion"), std::string::npos) << e;
+}
+
 TEST(BodyModel, UnknownKeyNamesFileLineAndKey) {
   const std::string e = error_of("segments:\n  - name: a\n    colour: red\n");
   EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;

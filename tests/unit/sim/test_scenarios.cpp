@@ -158,7 +158,7 @@ TEST(SimScenarios, ValidationNamesFileLineAndKey) {
   };
   EXPECT_EQ(message("duration_s: 10\nbody:\n  kind: free\n  spin: 3\n"),
             "s.yaml:4: unknown key 'spin' in body (known keys: kind, segment, pose, random, rotations, moves, "
-            "pose_sequence, gait, reaching)");
+            "pose_sequence, gait, reaching, mounting)");
   EXPECT_NE(message("duration_s: 10\nmagnetic:\n  dipoles:\n    - {position_m: [0, 0, 1], moment: [1, 0, 0]}\n")
                 .find("s.yaml:4: unknown key 'moment' in a dipole"),
             std::string::npos);

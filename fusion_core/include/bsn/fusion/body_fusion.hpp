@@ -33,10 +33,13 @@ struct NodeSample {
 /// The joint from a segment's parent to the segment, at the segment's sample.
 struct JointEstimate {
   std::size_t parent = 0, child = 0;  ///< segment indices
-  Quat relative;                      ///< q_parent* (x) q_child, w >= 0
-  Vec3 angles;                        ///< relative decomposed in the child's joint_axes, rad
-  bool stale = false;                 ///< the parent's or the child's node is stale
-  bool initialising = false;          ///< the parent's or the child's filter is initialising
+  Quat relative;               ///< q_parent* (x) q_child of the published frames (SampleResult::orientation), w >= 0
+  Vec3 angles;                 ///< relative decomposed in the child's joint_axes, rad
+  JointConvention convention;  ///< the anatomical convention of the joint (type kNone: no anatomical angles)
+  Vec3 anatomical = Vec3::Zero();  ///< ISB angles of the two segment frames, rad, see anatomy.hpp
+  bool aligned = false;            ///< both sensor-to-segment rotations are known (not the default mounting)
+  bool stale = false;              ///< the parent's or the child's node is stale
+  bool initialising = false;       ///< the parent's or the child's filter is initialising
 };
 
 enum class SampleOutcome { kEstimated, kGateRejected, kFilterRejected, kUnknownNode };
@@ -54,8 +57,10 @@ struct SampleResult {
   /// previous_source); its gate restarted the stream and its filter restarted
   bool source_handover = false;
   SourceId previous_source;
-  // With kEstimated: the segment's orientation (sensor-to-earth), the filter's flags and gyro bias (rad/s).
+  // With kEstimated: the orientation (sensor-to-earth, or segment-to-earth when `aligned`), the filter's flags and
+  // gyro bias (rad/s, sensor frame).
   Quat orientation = Quat::Identity();
+  bool aligned = false;  ///< the segment's sensor-to-segment rotation is known: `orientation` is the segment frame
   FilterFlags flags;
   Vec3 gyro_bias = Vec3::Zero();
   std::optional<JointEstimate> joint;  ///< the joint to the parent, once the parent has an orientation
@@ -80,9 +85,12 @@ class BodyFusion {
     SampleGate gate;  ///< counts received, accepted, missing, clock resets, rejected by reason
     calib::SensorCalibration calibration;
     std::optional<std::size_t> parent;
-    std::uint64_t filter_rejected = 0;             ///< passed the gate, not used by the filter
-    std::optional<Quat> q;                         ///< the last orientation
-    FilterFlags flags;                             ///< of the last orientation
+    std::uint64_t filter_rejected = 0;  ///< passed the gate, not used by the filter
+    std::optional<Quat> q;              ///< the last published orientation (sensor frame, or segment frame if aligned)
+    std::optional<Quat> q_segment;      ///< the last segment (ISB) frame orientation, default mounting if not aligned
+    Quat sensor_to_segment = default_sensor_to_segment();
+    bool aligned = false;  ///< sensor_to_segment is known (body file or alignment), not the default
+    FilterFlags flags;     ///< of the last orientation
     std::optional<std::uint64_t> last_arrival_ns;  ///< of the last sample from the node's source
     bool stale = false;  ///< silent for the stale timeout (or, never heard of, the discovery grace)
     /// The writer the node's samples are taken from: the first one heard, until the node goes stale; then the
@@ -106,6 +114,9 @@ class BodyFusion {
   /// detector's magnetic reference, the gyro bias estimate) was built on the old calibration. Returns the
   /// segment, nullopt for a node on no segment.
   std::optional<std::size_t> update_calibration(std::string_view node, const calib::SensorCalibration& update);
+  /// A new sensor-to-segment rotation of `node`'s segment (an alignment), from its next sample on; the filter keeps
+  /// running (the sensor's orientation does not change). Returns the segment, nullopt for a node on no segment.
+  std::optional<std::size_t> update_alignment(std::string_view node, const Quat& sensor_to_segment);
   /// The segment of a node, nullopt for a node on no segment.
   std::optional<std::size_t> segment_of(std::string_view node) const;
   /// Marks the nodes silent at now_ns stale; returns the segments that turned stale with this call.

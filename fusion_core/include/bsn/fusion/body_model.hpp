@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "bsn/fusion/anatomy.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rotation.hpp"
 
@@ -19,6 +20,11 @@ struct SegmentSpec {
   std::string joint;        ///< name of the joint parent -> this segment, e.g. "hip_l"; "" = "<parent>-<name>"
   AxisSequence joint_axes;  ///< rotation sequence the joint angles are decomposed in (default z-y'-x'')
   FilterSpec filter;        ///< filter for this segment
+  /// Anatomical convention of the joint to the parent; nullopt = inferred from the joint's name.
+  std::optional<JointConvention> anatomy;
+  /// Rotation of the sensor's coordinates into the segment's ISB frame (a known mounting, or an alignment). nullopt:
+  /// unknown; the anatomical angles assume default_sensor_to_segment() and orientations stay in the sensor frame.
+  std::optional<Quat> sensor_to_segment;
 };
 
 struct BodyModel {
@@ -41,6 +47,9 @@ std::optional<BodyModelProblem> check_body_model(const BodyModel& body);
 
 /// Joint name of a segment: its explicit name, or "<parent>-<child>".
 std::string joint_name(const SegmentSpec& segment);
+
+/// Anatomical convention of the joint parent -> segment: the explicit one, or the one its name implies.
+JointConvention joint_convention(const SegmentSpec& segment);
 
 /// The default 7-segment lower body: pelvis; left and right thigh, shank and foot. Node ids equal segment names.
 BodyModel default_lower_body();

@@ -1,6 +1,7 @@
 // Between the IDL types and the cores' Eigen types.
 #pragma once
 
+#include "bsn/fusion/anatomy.hpp"
 #include "bsn/fusion/imu_sample.hpp"
 #include "bsn/fusion/rotation.hpp"
 #include "bsn_idl/bsn.h"
@@ -17,6 +18,9 @@ std::array<double, 4> to_wxyz(const fusion::Quat& q);
 
 /// Sets quat and yaw/pitch/roll of an Orientation from q.
 void fill_orientation(const fusion::Quat& q, bsn::Orientation& out);
+
+/// Sets the anatomical fields of a JointAngles (anatomy, side, names, angles in rad). Keeps the strings' buffers.
+void fill_anatomical(const fusion::JointConvention& convention, const fusion::Vec3& angles, bsn::JointAngles& out);
 
 /// Monotonic clock (CLOCK_MONOTONIC) in ns: the sensor clock of simulated nodes on one host.
 std::uint64_t monotonic_ns();

@@ -40,6 +40,9 @@ inline constexpr Topic<bsn::OrientationPubSubType> kOrientationTopic{"bsn/orient
 inline constexpr Topic<bsn::JointAnglesPubSubType> kJointAnglesTopic{"bsn/joint_angles", TopicQos::kEstimate};
 inline constexpr Topic<bsn::StatusPubSubType> kStatusTopic{"bsn/status", TopicQos::kLatched};
 inline constexpr Topic<bsn::OrientationPubSubType> kTruthOrientationTopic{"bsn/truth/orientation", TopicQos::kEstimate};
+/// The simulator's true joint angles (ISB segment frames), keyed by joint: what bsn/joint_angles should read.
+inline constexpr Topic<bsn::JointAnglesPubSubType> kTruthJointAnglesTopic{"bsn/truth/joint_angles",
+                                                                          TopicQos::kEstimate};
 inline constexpr Topic<bsn::CalibrationRequestPubSubType> kCalibrationRequestTopic{"bsn/calibration/request",
                                                                                    TopicQos::kCommand};
 inline constexpr Topic<bsn::CalibrationResultPubSubType> kCalibrationResultTopic{"bsn/calibration/result",
@@ -52,6 +55,7 @@ inline constexpr std::tuple kAllTopics{kRawTopic,
                                        kJointAnglesTopic,
                                        kStatusTopic,
                                        kTruthOrientationTopic,
+                                       kTruthJointAnglesTopic,
                                        kCalibrationRequestTopic,
                                        kCalibrationResultTopic,
                                        kCalibrationProgressTopic};

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "bsn/fusion/anatomy.hpp"
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/sim/signal.hpp"
 
@@ -31,7 +32,9 @@ struct SegmentDef {
   std::vector<RevoluteStep> rotation;  ///< parent frame -> segment frame (root: earth -> segment)
   std::array<Signal, 3> translation;   ///< root only: origin in the earth frame, m
   Vec3 sensor_offset = Vec3::Zero();   ///< sensor position in the segment frame, m
+  /// The sensor's mounting: sensor coordinates into segment coordinates (q_sensor = q_segment * sensor_to_segment).
   Quat sensor_to_segment = Quat::Identity();
+  std::string joint;  ///< name of the joint to the parent, e.g. "knee_l" (its anatomical convention comes from it)
 };
 
 /// Exact kinematics of one segment and its sensor at one instant.
@@ -52,6 +55,17 @@ struct SegmentState {
   /// Specific force in the sensor frame: R^T (a + g z), m/s^2.
   Vec3 specific_force_sensor() const;
 };
+
+/// Segment-to-earth orientation of a segment's ISB anatomical frame (X anterior, Y superior, Z right). The
+/// simulator's segment frames are x forward, y left, z up when standing: the default mounting of bsn's body model.
+inline Quat anatomical_orientation(const SegmentState& s) {
+  return fusion::segment_orientation(s.q_segment, fusion::default_sensor_to_segment());
+}
+
+/// The sensor-to-segment rotation into the ISB frame (what an alignment should find) of a segment's sensor.
+inline Quat true_sensor_to_segment(const SegmentDef& def) {
+  return fusion::default_sensor_to_segment() * def.sensor_to_segment;
+}
 
 class Body {
  public:
@@ -148,10 +162,25 @@ FreeMotion random_swing(std::uint64_t seed);
 
 /// Gait of the lower body: joint angles as harmonics of the stride phase (left and right half a stride
 /// apart), pelvis translation forward at `speed_m_s` with vertical and lateral oscillation.
+/// What a lab asks of a subject before walking, for the sensor-to-segment alignment: stand still in the N-pose,
+/// then flex each leg (hip, knee and ankle together) a few times, stand still again, then walk.
+struct AlignmentMoves {
+  double pose_s = 3.0;              ///< standing still in the N-pose at the start, and again before walking
+  int flexions_per_leg = 3;         ///< left leg first
+  double flexion_s = 2.0;           ///< one flexion, up and down
+  double hip_flexion_rad = 0.8;     ///< 46 deg
+  double knee_flexion_rad = 1.2;    ///< 69 deg
+  double ankle_flexion_rad = 0.35;  ///< 20 deg dorsiflexion
+  /// When walking starts, s.
+  double walk_start_s() const { return 2.0 * pose_s + 2.0 * flexions_per_leg * flexion_s; }
+};
+
 struct Gait {
   double cadence_steps_per_min = 110.0;
   double speed_m_s = 1.2;
   double heading_rad = 0.0;  ///< walking direction, yaw of the pelvis (0 = east)
+  /// First stand and flex, then walk on the spot (as on a treadmill: speed_m_s does not apply).
+  std::optional<AlignmentMoves> alignment;
 };
 /// Segments pelvis, thigh_l, shank_l, foot_l, thigh_r, shank_r, foot_r (segment x forward, y left, z up
 /// when standing). Without gait: standing still at `pose`.

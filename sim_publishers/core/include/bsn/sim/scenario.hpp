@@ -18,6 +18,13 @@ namespace bsn::sim {
 
 enum class BodyKind { kFree, kLowerBody, kUpperBody };
 
+/// How each sensor of a lower or upper body sits on its segment: rotated and displaced at random (own stream per
+/// segment), as sensors strapped on by hand are. The default is realistic: any rotation, up to 2 cm off its place.
+struct Mounting {
+  double max_rotation_deg = 180.0;  ///< 180: any rotation (uniform); below: random axis, angle uniform up to this
+  double max_offset_m = 0.02;       ///< displacement in a random direction, uniform up to this
+};
+
 struct ScenarioSpec {
   std::string name;
   std::string description;
@@ -30,6 +37,7 @@ struct ScenarioSpec {
   std::optional<Gait> gait;             ///< lower body
   std::optional<Reaching> reaching;     ///< upper body
   Pose pose;                            ///< lower and upper body: where they stand
+  Mounting mounting;                    ///< lower and upper body: the sensors' mounting errors
   MagneticEnvironment magnetic;         ///< attached magnets refer to segments of build_body() by index
   SensorErrors sensors;                 ///< the same error model (own random streams) on every segment
   std::vector<Window> movement;         ///< where errors count; empty = everywhere
@@ -48,6 +56,11 @@ struct ScenarioSample {
   Quat truth = Quat::Identity();
   bool dropped = false;  ///< the sensor lost this sample (sample is still filled with what it would have read)
   bool movement = true;  ///< inside the scenario's movement windows
+  // The joint to the segment's parent (none for a root): its convention (from the joint's name), the relative
+  // orientation of the two ISB segment frames and its anatomical angles, rad.
+  fusion::JointConvention joint;
+  std::optional<Quat> joint_relative;
+  Vec3 joint_anatomical = Vec3::Zero();
 };
 
 class ScenarioRunner {
@@ -70,6 +83,7 @@ class ScenarioRunner {
   Body body_;
   std::vector<std::size_t> selected_;
   std::vector<std::string> names_;
+  std::vector<fusion::JointConvention> joints_;  ///< per selected segment
   std::vector<SensorSimulator> sensors_;
   std::vector<std::mt19937_64> timing_rng_;  ///< per sensor: jitter and drops
   std::vector<SegmentState> states_;
