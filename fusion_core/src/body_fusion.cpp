@@ -20,6 +20,9 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
     : body_(std::move(body)),
       stale_timeout_ns_(seconds_to_ns(std::max(0.0, params.stale_timeout_s))),
       discovery_end_ns_(start_ns + seconds_to_ns(std::max(0.0, params.discovery_grace_s))),
+      max_joint_extrapolation_ns_(seconds_to_ns(std::isfinite(params.max_joint_extrapolation_s)
+                                                    ? std::clamp(params.max_joint_extrapolation_s, 0.0, 1.0)
+                                                    : 0.0)),
       segments_(body_.segments.size()) {
   turned_stale_.reserve(segments_.size());
   for (std::size_t i = 0; i < segments_.size(); ++i) {
@@ -100,16 +103,30 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
   r.orientation = *(seg.q = seg.aligned ? *seg.q_segment : q_sensor);
   r.flags = seg.flags = seg.filter->flags();
   r.gyro_bias = seg.filter->gyro_bias();
+  seg.q_sensor = q_sensor;
+  seg.rate = s.has_gyr ? Vec3(s.gyr - r.gyro_bias) : Vec3::Zero();
+  seg.timestamp_ns = s.timestamp_ns;
   if (const Segment* parent = seg.parent ? &segments_[*seg.parent] : nullptr; parent && parent->q) {
     const SegmentSpec& spec = body_.segments[r.segment];
-    const Quat relative = canonical(relative_orientation(*parent->q, *seg.q));
+    // The parent at the child's sample time: its latest orientation turned on by its rate over the lag (one clock).
+    Quat parent_q = *parent->q, parent_q_segment = *parent->q_segment;
+    const std::uint64_t lag_ns = seg.timestamp_ns > parent->timestamp_ns ? seg.timestamp_ns - parent->timestamp_ns
+                                                                         : parent->timestamp_ns - seg.timestamp_ns;
+    if (lag_ns > 0 && lag_ns <= max_joint_extrapolation_ns_) {
+      const double dt = seg.timestamp_ns > parent->timestamp_ns ? 1e-9 * static_cast<double>(lag_ns)
+                                                                : -1e-9 * static_cast<double>(lag_ns);
+      const Quat turned = (parent->q_sensor * exp_rotation_vector(parent->rate * dt)).normalized();
+      parent_q_segment = segment_orientation(turned, parent->sensor_to_segment);
+      parent_q = parent->aligned ? parent_q_segment : turned;
+    }
+    const Quat relative = canonical(relative_orientation(parent_q, *seg.q));
     const JointConvention convention = joint_convention(spec);
     r.joint = JointEstimate{*seg.parent,
                             r.segment,
                             relative,
                             decompose(relative, spec.joint_axes),
                             convention,
-                            anatomical_angles(relative_orientation(*parent->q_segment, *seg.q_segment), convention),
+                            anatomical_angles(relative_orientation(parent_q_segment, *seg.q_segment), convention),
                             parent->aligned && seg.aligned,
                             parent->stale || seg.stale,
                             parent->flags.initialising || seg.flags.initialising};

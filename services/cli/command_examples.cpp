@@ -33,8 +33,9 @@ const std::map<std::string, std::string>& examples() {
        "  bsn echo bsn/status --count 1 --timeout 10\n"
        "  bsn echo bsn/raw --format csv --count 100 > raw.csv"},
       {"demo",
-       "  bsn demo                                   a simulated lower body and its fusion until Ctrl-C\n"
-       "  bsn demo --duration 20 --rate 200\n"
+       "  bsn demo                                   a simulated walking lower body and its fusion until Ctrl-C\n"
+       "  bsn demo --duration 20 --view              with the live 3D view in the browser (its URL is printed)\n"
+       "  bsn demo --random --rate 200               every node on its own random motion\n"
        "  bsn demo --calibrate                       live magnetometer calibration, heading error before and after"},
       {"eval",
        "  bsn sim --scenario sim_publishers/scenarios/fan_e.yaml --out trial/ && bsn eval trial/imu.hdf5\n"

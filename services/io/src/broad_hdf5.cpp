@@ -29,7 +29,9 @@ Matrix read_matrix(hid_t file, const std::string& path, const char* name, int co
   return m;
 }
 
-std::vector<std::uint8_t> read_flags(hid_t file, const std::string& path, const char* name) {
+// Reads a one-dimensional dataset, converted by HDF5 to `mem_type` (the C++ type T).
+template <class T>
+std::vector<T> read_vector(hid_t file, const std::string& path, const char* name, hid_t mem_type) {
   Handle ds(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
   if (!ds.ok()) throw IoError(path + ": cannot open dataset '" + name + "'");
   Handle space(H5Dget_space(ds.get()), H5Sclose);
@@ -37,27 +39,17 @@ std::vector<std::uint8_t> read_flags(hid_t file, const std::string& path, const 
   if (H5Sget_simple_extent_ndims(space.get()) != 1 || H5Sget_simple_extent_dims(space.get(), &n, nullptr) < 0) {
     throw IoError(path + ": dataset '" + name + "' must be one-dimensional");
   }
-  // BROAD stores booleans as an int8 enum; reading as native int8 converts enum and integer types alike.
-  std::vector<std::int8_t> raw(n);
-  if (n > 0 && H5Dread(ds.get(), H5T_NATIVE_INT8, H5S_ALL, H5S_ALL, H5P_DEFAULT, raw.data()) < 0) {
+  std::vector<T> v(n);
+  if (n > 0 && H5Dread(ds.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) < 0) {
     throw IoError(path + ": cannot read dataset '" + name + "'");
   }
-  return {raw.begin(), raw.end()};
+  return v;
 }
 
-std::vector<std::uint64_t> read_times(hid_t file, const std::string& path, const char* name) {
-  Handle ds(H5Dopen2(file, name, H5P_DEFAULT), H5Dclose);
-  if (!ds.ok()) throw IoError(path + ": cannot open dataset '" + name + "'");
-  Handle space(H5Dget_space(ds.get()), H5Sclose);
-  hsize_t n = 0;
-  if (H5Sget_simple_extent_ndims(space.get()) != 1 || H5Sget_simple_extent_dims(space.get(), &n, nullptr) < 0) {
-    throw IoError(path + ": dataset '" + name + "' must be one-dimensional");
-  }
-  std::vector<std::uint64_t> t(n);
-  if (n > 0 && H5Dread(ds.get(), H5T_NATIVE_UINT64, H5S_ALL, H5S_ALL, H5P_DEFAULT, t.data()) < 0) {
-    throw IoError(path + ": cannot read dataset '" + name + "'");
-  }
-  return t;
+std::vector<std::uint8_t> read_flags(hid_t file, const std::string& path, const char* name) {
+  // BROAD stores booleans as an int8 enum; reading as native int8 converts enum and integer types alike.
+  const auto raw = read_vector<std::int8_t>(file, path, name, H5T_NATIVE_INT8);
+  return {raw.begin(), raw.end()};
 }
 
 using hdf5::untimed_dataset_properties;
@@ -89,7 +81,8 @@ Recording read_broad_hdf5(const std::string& path) {
   if (has_dataset(file.get(), "opt_quat")) rec.opt_quat = read_matrix<RowsX4>(file.get(), path, "opt_quat", 4);
   if (has_dataset(file.get(), "opt_pos")) rec.opt_pos = read_matrix<RowsX3>(file.get(), path, "opt_pos", 3);
   if (has_dataset(file.get(), "movement")) rec.movement = read_flags(file.get(), path, "movement");
-  if (has_dataset(file.get(), "timestamp_ns")) rec.timestamp_ns = read_times(file.get(), path, "timestamp_ns");
+  if (has_dataset(file.get(), "timestamp_ns"))
+    rec.timestamp_ns = read_vector<std::uint64_t>(file.get(), path, "timestamp_ns", H5T_NATIVE_UINT64);
   if (H5Aexists(file.get(), "sampling_rate") <= 0) throw IoError(path + ": missing attribute 'sampling_rate'");
   Handle attr(H5Aopen(file.get(), "sampling_rate", H5P_DEFAULT), H5Aclose);
   if (!attr.ok() || H5Aread(attr.get(), H5T_NATIVE_DOUBLE, &rec.sampling_rate_hz) < 0) {

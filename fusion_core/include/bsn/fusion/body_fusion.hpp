@@ -73,6 +73,13 @@ class BodyFusion {
     double stale_timeout_s = 0.3;
     /// A node that never sent is reported stale this long after the start, s: time for discovery.
     double discovery_grace_s = 2.0;
+    /// A joint pairs the child's new orientation with the parent's latest, which may be a few samples older (its
+    /// sample has not arrived yet). The parent is turned on by its last bias-corrected gyro rate to the child's
+    /// sample time when the two sensor times differ by at most this, s (a lag of one sample at 300 deg/s, a thigh
+    /// in swing, is 3 deg at 100 Hz). A body's sensor clocks are taken to be one clock (as BSN hardware and
+    /// `bsn sim --start-at` make them); a larger difference is not a lag but another clock, and the parent's latest
+    /// is used as it is. Default 0.05 s (5 samples at 100 Hz); 0 turns it off.
+    double max_joint_extrapolation_s = 0.05;
     SampleGate::Params gate;
   };
   /// Per node id: the calibration applied to every raw sample (u = H (raw - B)) before the gate and filter.
@@ -89,8 +96,11 @@ class BodyFusion {
     std::optional<Quat> q;              ///< the last published orientation (sensor frame, or segment frame if aligned)
     std::optional<Quat> q_segment;      ///< the last segment (ISB) frame orientation, default mounting if not aligned
     Quat sensor_to_segment = default_sensor_to_segment();
-    bool aligned = false;  ///< sensor_to_segment is known (body file or alignment), not the default
-    FilterFlags flags;     ///< of the last orientation
+    bool aligned = false;              ///< sensor_to_segment is known (body file or alignment), not the default
+    FilterFlags flags;                 ///< of the last orientation
+    Quat q_sensor = Quat::Identity();  ///< the last sensor-frame orientation (valid with q)
+    Vec3 rate = Vec3::Zero();          ///< the last bias-corrected gyro rate, rad/s, sensor frame (valid with q)
+    std::uint64_t timestamp_ns = 0;    ///< sensor time of the last orientation (valid with q)
     std::optional<std::uint64_t> last_arrival_ns;  ///< of the last sample from the node's source
     bool stale = false;  ///< silent for the stale timeout (or, never heard of, the discovery grace)
     /// The writer the node's samples are taken from: the first one heard, until the node goes stale; then the
@@ -130,7 +140,7 @@ class BodyFusion {
 
  private:
   BodyModel body_;
-  std::uint64_t stale_timeout_ns_, discovery_end_ns_;
+  std::uint64_t stale_timeout_ns_, discovery_end_ns_, max_joint_extrapolation_ns_;
   std::vector<Segment> segments_;
   // Node id -> segment index, looked up with the sample's string_view: one hash per sample, no allocation.
   struct NodeHash {
