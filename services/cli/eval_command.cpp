@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "bsn/dds/child_process.hpp"
 #include "bsn/eval/evaluation.hpp"
 #include "bsn/eval/standard_tests.hpp"
 #include "bsn/io/recording.hpp"
@@ -20,8 +21,15 @@ struct EvalOptions {
   bool json = false;                 ///< print the JSON object instead of the table
   std::string plot_path;             ///< write an SVG of error over time here ("" = no plot)
   bool standard_tests = false;       ///< run Fan et al. 2018's tests A-E on the simulator instead of recordings
-  std::string scenario_dir = BSN_SCENARIO_DIR;  ///< where fan_a..fan_e.yaml are
+  std::string scenario_dir;          ///< where fan_a..fan_e.yaml are ("" = default_scenario_dir())
 };
+
+// The scenarios of this checkout when bsn runs from its build tree, else those installed beside the program
+// (<prefix>/share/bsn/scenarios, as the Debian package puts them).
+std::string default_scenario_dir() {
+  if (std::filesystem::is_directory(BSN_SCENARIO_DIR)) return BSN_SCENARIO_DIR;
+  return (std::filesystem::path(dds::self_executable()).parent_path().parent_path() / "share/bsn/scenarios").string();
+}
 
 namespace fs = std::filesystem;
 
@@ -51,7 +59,7 @@ int run_eval(const EvalOptions& opt) {
     }
     std::vector<eval::StandardTestResult> results;
     try {
-      results = eval::run_standard_tests(opt.scenario_dir, filters);
+      results = eval::run_standard_tests(opt.scenario_dir.empty() ? default_scenario_dir() : opt.scenario_dir, filters);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
       return 2;
@@ -174,8 +182,9 @@ Command eval_command() {
             cmd->add_option("--plot", opt->plot_path, "write an SVG image of the total error over time per filter");
             cmd->add_flag("--standard-tests", opt->standard_tests,
                           "run Fan et al. 2018's tests A-E on the simulator and print their Table 5 with grades");
-            cmd->add_option("--scenarios", opt->scenario_dir, "folder of fan_a..fan_e.yaml for --standard-tests")
-                ->capture_default_str();
+            cmd->add_option("--scenarios", opt->scenario_dir,
+                            "folder of fan_a..fan_e.yaml for --standard-tests (default: this checkout's "
+                            "sim_publishers/scenarios, else <prefix>/share/bsn/scenarios beside the program)");
             return [opt] { return run_eval(*opt); };
           }};
 }
