@@ -86,9 +86,6 @@ struct EstimateWatch {
   }
 };
 
-std::string key_name(const bsn::Orientation& s) { return s.segment(); }
-std::string key_name(const bsn::JointAngles& s) { return s.joint(); }
-
 // One line per sample; an orientation line says which of the two orientation topics it comes from.
 std::string format_line(const bsn::Orientation& s, std::string_view topic) {
   return format_sample(s, topic == dds::kTruthOrientationTopic.name ? "truth" : "orientation");
@@ -160,7 +157,7 @@ int run_echo(const EchoOptions& opt) {
           using T = std::remove_cvref_t<decltype(s)>;
           if constexpr (kIsEstimate<T>) {
             const bool finite = dds::finite_values(s);
-            const std::size_t writers = watch.note(key_name(s), info, finite);
+            const std::size_t writers = watch.note(key_of(s), info, finite);
             if (opt.format == "text") {
               printer.print((finite ? format_line(s, name) : non_finite_line(s, name)) +
                                 (writers > 1 ? " writers=" + std::to_string(writers) : ""),
