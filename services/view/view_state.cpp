@@ -4,6 +4,9 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <string_view>
+
+#include "bsn/io/json.hpp"
 
 namespace bsn::services {
 namespace {
@@ -13,11 +16,7 @@ constexpr std::uint64_t kIntervalNs = static_cast<std::uint64_t>(1e9 / ViewState
 
 std::string name_of(const std::string& s) { return json_string(s.substr(0, ViewState::kMaxNameChars)); }
 
-std::string number(double v, int digits = 9) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
-  return buf;
-}
+std::string number(double v, int digits = 9) { return io::json_number(v, digits); }
 
 std::string quat_json(const std::array<double, 4>& q) {
   return "[" + number(q[0]) + "," + number(q[1]) + "," + number(q[2]) + "," + number(q[3]) + "]";
@@ -37,23 +36,7 @@ typename Map::mapped_type* slot_for(Map& map, const std::string& key) {
 
 }  // namespace
 
-std::string json_string(std::string_view text) {
-  std::string out = "\"";
-  for (const char ch : text) {
-    const auto c = static_cast<unsigned char>(ch);
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += ch;
-    } else if (c < 0x20 || c >= 0x7f) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", c);
-      out += buf;
-    } else {
-      out += ch;
-    }
-  }
-  return out + "\"";
-}
+std::string json_string(std::string_view text) { return io::json_string(text, /*ascii_only=*/true); }
 
 double rotation_angle_deg(const std::array<double, 4>& a, const std::array<double, 4>& b) {
   // The rotation a^* b: its angle from atan2 (acos of the dot product loses digits near 0).
