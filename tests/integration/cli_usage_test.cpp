@@ -21,7 +21,7 @@ class CliUsage : public ProcessTest {
   int run(const std::string& name, const std::vector<std::string>& args) {
     const auto status = spawn(name, args).wait_for(20s);
     EXPECT_TRUE(status.has_value()) << "bsn " << name << " did not exit within 20 s";
-    return status && WIFEXITED(*status) ? WEXITSTATUS(*status) : -1;
+    return exit_code(status);
   }
   std::string output(const std::string& name) { return read_file(log_path(name)); }
 };

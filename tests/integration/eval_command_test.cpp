@@ -3,6 +3,7 @@
 
 #include <cmath>
 
+#include "bsn/eval/tune_runner.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/io/recording.hpp"
 #include "bsn/sim/scenario.hpp"
@@ -15,24 +16,7 @@ class EvalCommand : public ProcessTest {
  protected:
   // Readings of a known rotation with its truth as reference, written as BROAD HDF5.
   std::string write_trial(const std::string& name, std::uint64_t seed) {
-    sim::ScenarioRunner runner(sim::swing_scenario("imu", seed, 100.0, 15.0), {}, false);
-    io::Recording rec;
-    rec.sampling_rate_hz = 100.0;
-    const auto n = static_cast<Eigen::Index>(runner.sample_count());
-    rec.gyr.resize(n, 3);
-    rec.acc.resize(n, 3);
-    rec.mag.resize(n, 3);
-    rec.opt_quat.resize(n, 4);
-    rec.movement.assign(static_cast<std::size_t>(n), 1);
-    std::vector<sim::ScenarioSample> out;
-    for (Eigen::Index i = 0; runner.next(out); ++i) {
-      const fusion::ImuSample& s = out[0].sample;
-      rec.gyr.row(i) = s.gyr.transpose();
-      rec.acc.row(i) = s.acc.transpose();
-      rec.mag.row(i) = s.mag.transpose();
-      const auto& q = out[0].truth;
-      rec.opt_quat.row(i) << q.w(), q.x(), q.y(), q.z();
-    }
+    const io::Recording rec = eval::simulate_recording(sim::swing_scenario("imu", seed, 100.0, 15.0));
     const std::string path = (dir() / "trials" / (name + ".hdf5")).string();
     std::filesystem::create_directories(dir() / "trials");
     io::write_broad_hdf5(path, rec);

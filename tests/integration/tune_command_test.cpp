@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 
+#include "bsn/eval/tune_runner.hpp"
 #include "bsn/io/recording.hpp"
 #include "bsn/sim/scenario.hpp"
 #include "process_fixture.hpp"
@@ -14,26 +15,9 @@ namespace {
 
 class TuneCommand : public ProcessTest {
  protected:
-  // Noisy readings of a known motion (the simulator's default sensor), the truth as reference, as BROAD HDF5.
+  // Noisy readings of a known motion (the simulator's default sensor), the truth as reference.
   io::Recording trial(std::uint64_t seed) {
-    sim::ScenarioRunner runner(sim::swing_scenario("imu", seed, 100.0, 12.0), {}, false);
-    io::Recording rec;
-    rec.sampling_rate_hz = 100.0;
-    const auto n = static_cast<Eigen::Index>(runner.sample_count());
-    rec.gyr.resize(n, 3);
-    rec.acc.resize(n, 3);
-    rec.mag.resize(n, 3);
-    rec.opt_quat.resize(n, 4);
-    std::vector<sim::ScenarioSample> out;
-    for (Eigen::Index i = 0; runner.next(out); ++i) {
-      const fusion::ImuSample& s = out[0].sample;
-      rec.gyr.row(i) = s.gyr.transpose();
-      rec.acc.row(i) = s.acc.transpose();
-      rec.mag.row(i) = s.mag.transpose();
-      const auto& q = out[0].truth;
-      rec.opt_quat.row(i) << q.w(), q.x(), q.y(), q.z();
-    }
-    return rec;
+    return eval::simulate_recording(sim::swing_scenario("imu", seed, 100.0, 12.0));
   }
   std::string write(const std::string& name, const io::Recording& rec) {
     std::filesystem::create_directories(dir() / "trials");
@@ -46,8 +30,6 @@ class TuneCommand : public ProcessTest {
     return child(name).wait_for(std::chrono::seconds(90));
   }
 };
-
-int exit_code(const std::optional<int>& st) { return st && WIFEXITED(*st) ? WEXITSTATUS(*st) : -1; }
 
 TEST_F(TuneCommand, FilterBlockFitAndHeldOut) {
   const std::string a = write("walk_a", trial(1)), b = write("walk_b", trial(2)), c = write("walk_c", trial(3));

@@ -5,6 +5,7 @@
 #include <numbers>
 
 #include "bsn/eval/evaluation.hpp"
+#include "bsn/eval/tune_runner.hpp"
 #include "bsn/sim/scenario.hpp"
 
 namespace bsn::eval {
@@ -54,24 +55,7 @@ TEST(ErrorAngles, RmsAccumulator) {
 
 // A recording of exact sensor readings of a known motion, with the truth as reference.
 io::Recording simulated(double seconds, double rate_hz) {
-  sim::ScenarioRunner runner(sim::swing_scenario("sim", 21, rate_hz, seconds), {}, true);
-  const auto n = static_cast<Eigen::Index>(runner.sample_count());
-  io::Recording rec;
-  rec.sampling_rate_hz = rate_hz;
-  rec.gyr.resize(n, 3);
-  rec.acc.resize(n, 3);
-  rec.mag.resize(n, 3);
-  rec.opt_quat.resize(n, 4);
-  std::vector<sim::ScenarioSample> out;
-  for (Eigen::Index i = 0; runner.next(out); ++i) {
-    const fusion::ImuSample& s = out[0].sample;
-    rec.gyr.row(i) = s.gyr.transpose();
-    rec.acc.row(i) = s.acc.transpose();
-    rec.mag.row(i) = s.mag.transpose();
-    const Quat& q = out[0].truth;
-    rec.opt_quat.row(i) << q.w(), q.x(), q.y(), q.z();
-  }
-  return rec;
+  return simulate_recording(sim::swing_scenario("sim", 21, rate_hz, seconds), /*ideal=*/true);
 }
 
 // With exact readings only the strapdown discretisation remains: a rate sample held over one sample period
