@@ -31,19 +31,22 @@ double cost(const std::vector<Vec3>& g1, const std::vector<Vec3>& g2, const Vec3
   return c;
 }
 
-// J^T J of the residuals at (j1, j2) in the tangent bases of tangent_basis().
-Eigen::Matrix4d normal_matrix(const std::vector<Vec3>& g1, const std::vector<Vec3>& g2, const Vec3& j1,
-                              const Vec3& j2) {
+// The Gauss-Newton normal equations at (j1, j2) in the tangent bases of tangent_basis(): J^T J, and J^T e of the
+// residuals e = |g1 x j1| - |g2 x j2| when `jte` is given.
+Eigen::Matrix4d normal_matrix(const std::vector<Vec3>& g1, const std::vector<Vec3>& g2, const Vec3& j1, const Vec3& j2,
+                              Eigen::Vector4d* jte = nullptr) {
   Vec3 u1, w1, u2, w2;
   tangent_basis(j1, u1, w1);
   tangent_basis(j2, u2, w2);
   Eigen::Matrix4d jtj = Eigen::Matrix4d::Zero();
+  if (jte) jte->setZero();
   for (std::size_t k = 0; k < g1.size(); ++k) {
     double n1 = 0.0, n2 = 0.0;
     const Vec3 d1 = norm_cross_gradient(g1[k], j1, n1);
     const Vec3 d2 = norm_cross_gradient(g2[k], j2, n2);
     const Eigen::Vector4d row(d1.dot(u1), d1.dot(w1), -d2.dot(u2), -d2.dot(w2));
     jtj += row * row.transpose();
+    if (jte) *jte += row * (n1 - n2);
   }
   return jtj;
 }
@@ -55,16 +58,8 @@ double refine(const std::vector<Vec3>& g1, const std::vector<Vec3>& g2, Vec3& j1
     Vec3 u1, w1, u2, w2;
     tangent_basis(j1, u1, w1);
     tangent_basis(j2, u2, w2);
-    Eigen::Matrix4d jtj = Eigen::Matrix4d::Zero();
-    Eigen::Vector4d jte = Eigen::Vector4d::Zero();
-    for (std::size_t k = 0; k < g1.size(); ++k) {
-      double n1 = 0.0, n2 = 0.0;
-      const Vec3 d1 = norm_cross_gradient(g1[k], j1, n1);
-      const Vec3 d2 = norm_cross_gradient(g2[k], j2, n2);
-      const Eigen::Vector4d row(d1.dot(u1), d1.dot(w1), -d2.dot(u2), -d2.dot(w2));
-      jtj += row * row.transpose();
-      jte += row * (n1 - n2);
-    }
+    Eigen::Vector4d jte;
+    const Eigen::Matrix4d jtj = normal_matrix(g1, g2, j1, j2, &jte);
     bool improved = false;
     for (int tries = 0; tries < 10 && !improved; ++tries) {
       Eigen::Matrix4d a = jtj;
