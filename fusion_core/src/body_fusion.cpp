@@ -110,11 +110,11 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
     const SegmentSpec& spec = body_.segments[r.segment];
     // The parent at the child's sample time: its latest orientation turned on by its rate over the lag (one clock).
     Quat parent_q = *parent->q, parent_q_segment = *parent->q_segment;
-    const std::uint64_t lag_ns = seg.timestamp_ns > parent->timestamp_ns ? seg.timestamp_ns - parent->timestamp_ns
-                                                                         : parent->timestamp_ns - seg.timestamp_ns;
-    if (lag_ns > 0 && lag_ns <= max_joint_extrapolation_ns_) {
-      const double dt = seg.timestamp_ns > parent->timestamp_ns ? 1e-9 * static_cast<double>(lag_ns)
-                                                                : -1e-9 * static_cast<double>(lag_ns);
+    // Signed (the parent may also be ahead); the modular difference is exact for any lag within the bound.
+    const auto lag_ns = static_cast<std::int64_t>(seg.timestamp_ns - parent->timestamp_ns);
+    const auto max_ns = static_cast<std::int64_t>(max_joint_extrapolation_ns_);
+    if (lag_ns != 0 && lag_ns >= -max_ns && lag_ns <= max_ns) {
+      const double dt = 1e-9 * static_cast<double>(lag_ns);
       const Quat turned = (parent->q_sensor * exp_rotation_vector(parent->rate * dt)).normalized();
       parent_q_segment = segment_orientation(turned, parent->sensor_to_segment);
       parent_q = parent->aligned ? parent_q_segment : turned;
