@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 #include "bsn/config/body_config.hpp"
@@ -100,30 +101,38 @@ void FusionService::on_calibration(const bsn::CalibrationResult& r) {
   const fusion::SegmentSpec& spec = fusion_.body().segments[*segment];
   logging::log_info("node '", spec.node, "' (", spec.name, "): ", channel, " calibration '", r.request_id(),
                     "' applied from its next sample on; its filter restarts");
-  publish_status(dds::monotonic_ns());
+  status_due_ = true;
 }
 
 void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer) {
-  std::lock_guard lock(mutex_);
-  const std::uint64_t now = dds::monotonic_ns();
-  const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now, writer);
-  if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
-    if (r.new_unknown_node)
-      logging::log_warn("samples from node '", logging::printable(raw.node_id()),
-                        "', which is on no segment of the body model; ignored");
-    return;
+  // Lock order: publish_mutex_, then mutex_. DDS writes happen after mutex_ is released (see the header).
+  std::lock_guard publishing(publish_mutex_);
+  bool joint = false;
+  {
+    std::lock_guard lock(mutex_);
+    const std::uint64_t now = dds::monotonic_ns();
+    const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now, writer);
+    if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
+      if (r.new_unknown_node)
+        logging::log_warn("samples from node '", logging::printable(raw.node_id()),
+                          "', which is on no segment of the body model; ignored");
+      return;
+    }
+    log_source_events(r, now);
+    const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
+    if (r.node_fresh) {
+      logging::log_info("node '", spec.node, "' (", spec.name, ") is sending again");
+      status_due_ = true;
+    }
+    if (r.clock_reset)
+      logging::log_warn("node '", spec.node, "': its clock moved to a new time base; restarting its filter");
+    if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
+    fill_orientation(r, raw.timestamp_ns());
+    if (r.joint) fill_joint(*r.joint, raw.timestamp_ns());
+    joint = r.joint.has_value();
   }
-  log_source_events(r, now);
-  const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
-  if (r.node_fresh) {
-    logging::log_info("node '", spec.node, "' (", spec.name, ") is sending again");
-    publish_status(now);
-  }
-  if (r.clock_reset)
-    logging::log_warn("node '", spec.node, "': its clock moved to a new time base; restarting its filter");
-  if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
-  publish_orientation(r, raw.timestamp_ns());
-  if (r.joint) publish_joint(*r.joint, raw.timestamp_ns());
+  if (!orientation_writer_->write(orientation_msg_)) ++write_failures_;
+  if (joint && !joint_writer_->write(joint_msg_)) ++write_failures_;
 }
 
 void FusionService::log_source_events(const fusion::SampleResult& r, std::uint64_t now) {
@@ -168,7 +177,7 @@ void FusionService::on_status(const bsn::Status& other) {
   status_due_ = true;
 }
 
-void FusionService::publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns) {
+void FusionService::fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns) {
   const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
   bsn::Orientation& o = orientation_msg_;
   o.segment(spec.name);
@@ -177,10 +186,9 @@ void FusionService::publish_orientation(const fusion::SampleResult& r, std::uint
   dds::fill_orientation(r.orientation, o);
   o.gyro_bias({r.gyro_bias.x(), r.gyro_bias.y(), r.gyro_bias.z()});
   o.flags(to_wire_flags(r.flags) | (r.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u));
-  if (!orientation_writer_->write(o)) ++write_failures_;
 }
 
-void FusionService::publish_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns) {
+void FusionService::fill_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns) {
   const fusion::SegmentSpec& child = fusion_.body().segments[joint.child];
   bsn::JointAngles& j = joint_msg_;
   j.joint(fusion::joint_name(child));
@@ -193,24 +201,27 @@ void FusionService::publish_joint(const fusion::JointEstimate& joint, std::uint6
   j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u) |
           (joint.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u));
   dds::fill_anatomical(joint.convention, joint.anatomical, j);
-  if (!joint_writer_->write(j)) ++write_failures_;
 }
 
 void FusionService::tick() {
-  std::lock_guard lock(mutex_);
-  const std::uint64_t now = dds::monotonic_ns();
-  const auto turned_stale = fusion_.check_stale(now);
-  for (const std::size_t i : turned_stale) {
-    const fusion::SegmentSpec& spec = fusion_.body().segments[i];
-    if (fusion_.segment(i).last_arrival_ns) logging::log_warn("node '", spec.node, "' (", spec.name, ") is stale");
+  std::optional<bsn::Status> status;
+  {
+    std::lock_guard lock(mutex_);
+    const std::uint64_t now = dds::monotonic_ns();
+    const auto turned_stale = fusion_.check_stale(now);
+    for (const std::size_t i : turned_stale) {
+      const fusion::SegmentSpec& spec = fusion_.body().segments[i];
+      if (fusion_.segment(i).last_arrival_ns) logging::log_warn("node '", spec.node, "' (", spec.name, ") is stale");
+    }
+    if (!turned_stale.empty() || status_due_ || seconds(now - last_status_ns_) >= options_.status_period_s) {
+      status_due_ = false;
+      status = make_status(now);
+    }
   }
-  if (!turned_stale.empty() || status_due_ || seconds(now - last_status_ns_) >= options_.status_period_s) {
-    status_due_ = false;
-    publish_status(now);
-  }
+  if (status) status_writer_->write(*status);
 }
 
-void FusionService::publish_status(std::uint64_t now) {
+bsn::Status FusionService::make_status(std::uint64_t now) {
   const double window = seconds(now - rate_window_start_ns_);
   const bool window_complete = window >= options_.status_period_s;
   if (window_complete) {
@@ -266,8 +277,8 @@ void FusionService::publish_status(std::uint64_t now) {
   st.dds_rejected_samples(participant_.rejected_samples());
   st.dds_lost_samples(participant_.lost_samples());
   st.other_fusion_processes(other_fusions_);
-  status_writer_->write(st);
   last_status_ns_ = now;
+  return st;
 }
 
 namespace {

@@ -1,6 +1,7 @@
 // The fusion service (`bsn fusion`): raw samples in over DDS, BodyFusion, orientations, joint angles and status out.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -36,12 +37,17 @@ class FusionService {
   void log_source_events(const fusion::SampleResult& r, std::uint64_t now_ns);
   void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
   void on_status(const bsn::Status& status);  ///< another process's status (DDS thread): a second fusion?
-  void publish_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);
-  void publish_joint(const fusion::JointEstimate& j, std::uint64_t timestamp_ns);
-  void publish_status(std::uint64_t now_ns);
+  void fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);  ///< into orientation_msg_
+  void fill_joint(const fusion::JointEstimate& j, std::uint64_t timestamp_ns);       ///< into joint_msg_
+  bsn::Status make_status(std::uint64_t now_ns);  ///< with mutex_ held; restarts the rate window when due
 
   dds::Participant& participant_;
   Options options_;
+  // No DDS write happens with mutex_ held: a write may deliver to this participant's own readers, whose locks the
+  // DDS threads hold while their callbacks wait for mutex_ (our status to our status reader while on_status of
+  // another fusion waits: a deadlock seen once in CI). Every status goes out from tick(), within one tick of its
+  // cause (status_due_). publish_mutex_ keeps the raw callbacks' orientation_msg_/joint_msg_ whole until written.
+  std::mutex publish_mutex_;
   std::mutex mutex_;
   fusion::BodyFusion fusion_;
   // Rates are counted over windows of at least one status period, so that an early status (a node turning
@@ -50,7 +56,7 @@ class FusionService {
   std::vector<double> rate_hz_;                          ///< per segment, over the last full window
   std::uint64_t rate_window_start_ns_ = 0;
   double rate_window_s_ = 0.0;  ///< length of the last full window
-  std::uint64_t write_failures_ = 0;
+  std::atomic<std::uint64_t> write_failures_ = 0;
   std::uint64_t last_status_ns_ = 0;
   std::unique_ptr<dds::Writer<bsn::Orientation>> orientation_writer_;
   std::unique_ptr<dds::Writer<bsn::JointAngles>> joint_writer_;
