@@ -281,6 +281,7 @@ std::vector<CodeBlock> extract_code_blocks(std::string_view markdown, std::strin
       std::string_view line = lines[i].text;
       line.remove_prefix(std::min(indentation(line), open->indent));  // the block's own indentation
       body.push_back({lines[i].number, line});
+      block.lines.emplace_back(line);
     }
     if (!closed) fail(name, block.fence_line, "the code block is not closed");
     if (block.shell) block.commands = split_commands(body, name, block.fence_line);

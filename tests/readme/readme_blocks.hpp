@@ -31,6 +31,7 @@ struct CodeBlock {
   std::string attributes;                  ///< the rest of the info string, trimmed
   bool shell = false;                      ///< language is sh, bash or shell
   std::optional<std::string> skip_reason;  ///< set by a `readme-test: skip` marker
+  std::vector<std::string> lines;          ///< the block's lines, its own indentation removed
   std::vector<Command> commands;           ///< for shell blocks: the commands, comment-only and blank lines left out
 
   bool runs() const { return shell && !skip_reason; }
