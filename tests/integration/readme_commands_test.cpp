@@ -71,12 +71,39 @@ std::string quoted(const std::string& text) {
   return q + "'";
 }
 
-/// A copy of the repository's files (not its build folders or git data), where README commands may write.
+/// The repository's files as git tracks them ("" paths if `from` is not a git checkout or git is missing).
+std::vector<std::string> tracked_files(const fs::path& from) {
+  std::vector<std::string> files;
+  const std::string command = "git -C " + quoted(from.string()) + " ls-files -z 2>/dev/null";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return files;
+  std::string name;
+  for (int c; (c = std::fgetc(pipe)) != EOF;) {
+    if (c != '\0') {
+      name += static_cast<char>(c);
+    } else if (!name.empty()) {
+      files.push_back(std::move(name));
+      name.clear();
+    }
+  }
+  if (::pclose(pipe) != 0) files.clear();
+  return files;
+}
+
+/// A copy of the repository as a clone has it, where README commands may write: the tracked files (so what a
+/// developer made in the checkout by following the README, walk.h5 or trial/, is not there), or without git every
+/// file but the build folders.
 void copy_repository(const fs::path& from, const fs::path& to) {
   fs::create_directories(to);
+  const std::vector<std::string> tracked = tracked_files(from);
+  for (const auto& file : tracked) {
+    fs::create_directories((to / file).parent_path());
+    fs::copy(from / file, to / file, fs::copy_options::copy_symlinks);
+  }
+  if (!tracked.empty()) return;
   for (const auto& e : fs::directory_iterator(from)) {
     const std::string name = e.path().filename().string();
-    if (name.rfind("build", 0) == 0 || name.rfind(".git", 0) == 0) continue;
+    if (name.rfind("build", 0) == 0 || name == ".git") continue;
     fs::copy(e.path(), to / name, fs::copy_options::recursive | fs::copy_options::copy_symlinks);
   }
 }
@@ -150,6 +177,7 @@ class ReadmeCommands : public ProcessTest {
       const fs::path progress = dir() / (tag + ".line");
       std::ostringstream script;
       script << "set -euo pipefail\n"
+             << "exec < /dev/null\n"  // no command waits for a keyboard
              << "export BSN_DOMAIN=" << domain << "\n"
              << "export XDG_STATE_HOME=" << quoted((dir() / "state").string()) << "\n"  // bsn calibration's store
              << (broad.empty() ? std::string("unset BSN_BROAD_DIR\n") : "export BSN_BROAD_DIR=" + quoted(broad) + "\n")
@@ -240,12 +268,15 @@ class ReadmeCommands : public ProcessTest {
 };
 
 /// Removes what our commands left in /dev/shm (the README's own Fast DDS subscriber uses Fast DDS's default
-/// shared-memory transport): a new entry that no running process uses, other than another domain's port file.
+/// shared-memory transport; a clean exit leaves nothing, a killed one may): a new Fast DDS entry that no running
+/// process uses, other than another domain's port file. The folder is listed before the entries in use are
+/// collected, so an entry another test creates meanwhile is either not listed or seen open.
 void remove_our_shm_leftovers(const std::set<std::string>& before, int domain) {
+  const std::set<std::string> now = directory_entries("/dev/shm");
   const std::set<std::string> in_use = shm_entries_in_use();
   const long port_base = 7400 + 250L * domain;
-  for (const auto& e : directory_entries("/dev/shm")) {
-    if (before.contains(e) || in_use.contains(e)) continue;
+  for (const auto& e : now) {
+    if (before.contains(e) || in_use.contains(e) || e.find("fastrtps") == std::string::npos) continue;
     if (const auto at = e.find("fastrtps_port"); at != std::string::npos) {
       const long port = std::atol(e.c_str() + at + 13);
       if (port < port_base || port >= port_base + 250) continue;  // another domain's
