@@ -91,19 +91,20 @@ std::vector<std::string> tracked_files(const fs::path& from) {
 }
 
 /// A copy of the repository as a clone has it, where README commands may write: the tracked files (so what a
-/// developer made in the checkout by following the README, walk.h5 or trial/, is not there), or without git every
-/// file but the build folders.
+/// developer made in the checkout by following the README, walk.h5 or trial/, is not there), or without git (or
+/// as another user) every file but the build folders and hidden ones (.git, CI caches).
 void copy_repository(const fs::path& from, const fs::path& to) {
   fs::create_directories(to);
   const std::vector<std::string> tracked = tracked_files(from);
   for (const auto& file : tracked) {
+    if (!fs::exists(fs::symlink_status(from / file))) continue;  // deleted in the working tree, not yet in git
     fs::create_directories((to / file).parent_path());
     fs::copy(from / file, to / file, fs::copy_options::copy_symlinks);
   }
   if (!tracked.empty()) return;
   for (const auto& e : fs::directory_iterator(from)) {
     const std::string name = e.path().filename().string();
-    if (name.rfind("build", 0) == 0 || name == ".git") continue;
+    if (name.rfind("build", 0) == 0 || name.rfind(".", 0) == 0) continue;  // build trees, .git, caches
     fs::copy(e.path(), to / name, fs::copy_options::recursive | fs::copy_options::copy_symlinks);
   }
 }
