@@ -196,6 +196,13 @@ class ReadmeCommands : public ProcessTest {
           report.not_run.push_back(where + ": `" + code + "` " + provided->reason);
           continue;
         }
+        if (code.find("--domain") != std::string::npos) {
+          // It would talk on that domain whatever the test sets: domain 0 is the lab's own system.
+          report.failures.push_back(where + ": `" + code +
+                                    "` names its DDS domain, so the test cannot keep it off the user's domain: "
+                                    "leave --domain out (bsn takes $BSN_DOMAIN) or mark the block as not run");
+          return report;
+        }
         if (needs_broad(code) && broad.empty()) {
           report.not_run.push_back(where + ": needs the BROAD recordings, which are not in " + broad_dir_wanted() +
                                    " (set BSN_BROAD_DIR to the folder of the .hdf5 files)");
@@ -355,6 +362,21 @@ TEST_F(ReadmeCommands, TheRunnerNamesTheLineOfAFailingCommandAndListsWhatItDidNo
   ASSERT_EQ(report.notes.size(), 1u) << ::testing::PrintToString(report.notes);
   EXPECT_NE(report.notes[0].find("sleep 60"), std::string::npos) << report.notes[0];
   EXPECT_LT(Clock::now() - started, 30s) << "the background sleep was waited for instead of stopped";
+}
+
+TEST_F(ReadmeCommands, ACommandNamingItsDomainIsRefusedBeforeAnythingRuns) {
+  const std::string md =
+      "```sh\n"
+      "touch ran.txt\n"
+      "./build/bsn echo bsn/status --count 1 --domain 0\n"
+      "```\n";
+  const RunReport report = run_blocks(md, "doc.md", empty_repo(), test_domain(73), "", 60s);
+  ASSERT_EQ(report.failures.size(), 1u) << ::testing::PrintToString(report.failures);
+  EXPECT_EQ(
+      report.failures[0].rfind("doc.md:3: `./build/bsn echo bsn/status --count 1 --domain 0` names its DDS domain", 0),
+      0u)
+      << report.failures[0];
+  EXPECT_FALSE(fs::exists(dir() / "repo" / "ran.txt")) << "the block ran up to the command naming its domain";
 }
 
 TEST_F(ReadmeCommands, ACommandThatRunsTooLongFailsNamingItsLine) {
