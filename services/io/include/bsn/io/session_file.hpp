@@ -69,7 +69,9 @@ class SessionWriter {
   struct Stream;
   void create_stream(Stream& s);
   std::string path_;
+  void set_metadata_cache_size();  ///< to the datasets created so far
   long long file_id_ = -1;
+  std::size_t metadata_cache_bytes_ = 0;
   std::vector<std::unique_ptr<Stream>> streams_;
   std::vector<Stream*> staged_streams_;
 };
@@ -112,7 +114,9 @@ class SessionReader {
   template <class T>
   std::vector<T> read(const SessionStream& s, const std::string& dataset, long long mem_type, int width) const;
   std::string path_;
+  void set_metadata_cache_size();  ///< to the datasets created so far
   long long file_id_ = -1;
+  std::size_t metadata_cache_bytes_ = 0;
   std::vector<SessionStream> streams_;
   std::map<std::string, std::string> attributes_;
 };
