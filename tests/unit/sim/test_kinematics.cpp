@@ -13,7 +13,7 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-Gait walking() { return Gait{110.0, 1.3, 30.0 * kDeg, std::nullopt}; }
+Gait walking() { return Gait{110.0, 1.3, 30.0 * kDeg, std::nullopt, {}, {}}; }
 
 // q' = 1/2 q (0, w_sensor): the derivative of a sensor-to-earth quaternion from the body rate.
 Eigen::Vector4d quat_rate(const Eigen::Vector4d& q, const Vec3& w) {
