@@ -4,9 +4,11 @@
 // knee's anatomy and angle names.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <ctime>
 #include <map>
 #include <mutex>
+#include <numbers>
 
 #include "bsn/dds/participant.hpp"
 #include "process_fixture.hpp"
@@ -95,6 +97,48 @@ TEST_F(JointAngles, CommonStartAndNamedAnglesOfTheSimulatorAndTheFusion) {
   }
   EXPECT_TRUE(seen.last_truth.flags() & bsn::FLAG_SEGMENT_FRAME) << "the truth relates segment frames";
   EXPECT_FALSE(seen.last_estimate.flags() & bsn::FLAG_SEGMENT_FRAME) << "no alignment was given to the fusion";
+}
+
+TEST_F(JointAngles, KinematicHeadingModeShowsOnTheWire) {
+  // A body file asks for `heading: kinematic` on the knee: bsn/joint_angles flags it and carries the estimated
+  // offset and its observability.
+  const int domain = test_domain(61);
+  const std::string d = std::to_string(domain);
+  std::mutex mutex;
+  std::size_t estimates = 0;
+  bsn::JointAngles last;
+  dds::Participant participant({domain, "kinematic heading test"});
+  auto estimate = participant.make_reader(dds::kJointAnglesTopic, [&](const bsn::JointAngles& j, const auto&) {
+    std::lock_guard lock(mutex);
+    if (j.joint() != "knee_l") return;
+    ++estimates;
+    last = j;
+  });
+  write_file(dir() / "body.yaml",
+             "segments:\n  - name: thigh_l\n  - name: shank_l\n    parent: thigh_l\n    joint: knee_l\n"
+             "    heading: kinematic\n");
+  spawn("fusion", {"fusion", "--domain", d, "--body", (dir() / "body.yaml").string()});
+  const std::string start_at = std::to_string(std::time(nullptr) + 2);
+  const std::string scenario = std::string(BSN_SCENARIO_DIR) + "/gait_lower_body.yaml";
+  for (const char* node : {"thigh_l", "shank_l"})
+    spawn(std::string("sim-") + node,
+          {"sim", "--scenario", scenario, "--node", node, "--domain", d, "--start-at", start_at});
+  // 300 joint samples: 3 s of walking, three windows of the estimator.
+  ASSERT_TRUE(wait_until(
+      [&] {
+        std::lock_guard lock(mutex);
+        return estimates >= 300;
+      },
+      std::chrono::seconds(45)))
+      << read_file(log_path("sim-shank_l")) << read_file(log_path("fusion"));
+  std::lock_guard lock(mutex);
+  EXPECT_TRUE(last.flags() & bsn::FLAG_HEADING_KINEMATIC);
+  // Walking, the knee axis stays within a few degrees of horizontal: observability cos^2 of that, near 1.
+  EXPECT_GT(last.heading_observability(), 0.9);
+  EXPECT_LE(last.heading_observability(), 1.0);
+  // The first seconds are in a clean field, where both filters' headings err by a few degrees at most (Fan's test
+  // A: about 2 deg): their difference, the offset, stays well below 10 deg.
+  EXPECT_LT(std::abs(last.heading_offset()), 10.0 * std::numbers::pi / 180.0);
 }
 
 }  // namespace

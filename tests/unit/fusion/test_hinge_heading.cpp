@@ -39,6 +39,16 @@ HingeMotion hinge_at(std::uint64_t k) {
   return {parent, parent * about(Vec3::UnitZ(), -0.6 - 0.5 * std::sin(5.8 * t))};
 }
 
+/// Feeds samples k = 0 .. 299 (3 s, three windows) of the hinge with the parent's heading off by `offset`.
+std::uint64_t settle(HingeHeadingEstimator& est, double offset) {
+  std::uint64_t k = 0;
+  for (; k < 300; ++k) {
+    const HingeMotion m = hinge_at(k);
+    est.update(yaw(offset) * m.parent, m.child, k * kStepNs);
+  }
+  return k;
+}
+
 TEST(HingeHeading, RecoversTheHeadingOffsetOfAnExactHinge) {
   // The two filters' headings err by e_p and e_c: the axis constraint gives e_p - e_c exactly (no noise, an exact
   // hinge: every sample shows the same offset), and the corrected child makes the relative orientation exact.
@@ -59,21 +69,15 @@ TEST(HingeHeading, RecoversTheHeadingOffsetOfAnExactHinge) {
 
 TEST(HingeHeading, HoldsTheEstimateWhileTheAxisIsVertical) {
   HingeHeadingEstimator est;
-  std::uint64_t k = 0;
-  for (; k < 300; ++k) {
-    const HingeMotion m = hinge_at(k);
-    est.update(yaw(0.2) * m.parent, m.child, k * kStepNs);
-  }
+  std::uint64_t k = settle(est, 0.2);
   ASSERT_NEAR(est.state().offset_rad, 0.2, 1e-9);
   // Now the hinge axis points up: a heading about it is invisible. Another offset must not move the estimate.
   const Quat axis_up = about(Vec3::UnitX(), 0.02);  // Z of the segment within 1.2 deg of earth up
   for (; k < 800; ++k) {
-    const HingeMotion m = hinge_at(k);
     const Quat parent = yaw(0.9) * axis_up, child = axis_up * about(Vec3::UnitZ(), 0.3 * std::sin(0.05 * k));
     const auto& s = est.update(parent, child, k * kStepNs);
     EXPECT_FALSE(s.observed);
     EXPECT_NEAR(s.offset_rad, 0.2, 1e-12);
-    (void)m;
   }
   // 5 s of a vertical axis with a 1 s window: the observability has decayed to exp(-5) of its level.
   EXPECT_LT(est.state().observability, est.params().min_observability);
@@ -99,11 +103,7 @@ TEST(HingeHeading, FollowsAChangingOffsetWithinItsWindow) {
 
 TEST(HingeHeading, AGapOrTimeGoingBackRestartsTheWindow) {
   HingeHeadingEstimator est;
-  std::uint64_t k = 0;
-  for (; k < 300; ++k) {
-    const HingeMotion m = hinge_at(k);
-    est.update(yaw(0.3) * m.parent, m.child, k * kStepNs);
-  }
+  std::uint64_t k = settle(est, 0.3);
   // A gap of 2 s (over max_step_s): the first sample after it is the whole window.
   k += 200;
   HingeMotion m = hinge_at(k);
