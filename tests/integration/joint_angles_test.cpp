@@ -145,6 +145,12 @@ TEST_F(JointAngles, KinematicHeadingModeShowsOnTheWire) {
       },
       std::chrono::seconds(50)))
       << read_file(log_path("sim-shank_l")) << read_file(log_path("fusion"));
+  // bsn echo shows what the mode did.
+  spawn("echo", {"echo", "bsn/joint_angles", "--count", "1", "--timeout", "20", "--domain", d});
+  EXPECT_EQ(exit_code(child("echo").wait_for(std::chrono::seconds(30))), 0) << read_file(log_path("echo"));
+  const std::string echoed = read_file(log_path("echo"));
+  EXPECT_NE(echoed.find(" heading_offset="), std::string::npos) << echoed;
+  EXPECT_NE(echoed.find("heading_kinematic"), std::string::npos) << echoed;
   std::lock_guard lock(mutex);
   EXPECT_TRUE(last.flags() & bsn::FLAG_HEADING_KINEMATIC);
   // Walking, the knee axis stays within a few degrees of horizontal: observability cos^2 of that, near 1.
