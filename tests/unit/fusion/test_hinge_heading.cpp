@@ -168,9 +168,9 @@ struct KneeRun {
 /// Runs the thigh and the shank of fan_e_knee through BodyFusion (sensor-to-segment rotations known, as after the
 /// alignment) and scores the walking at P2, from 2 s after each arrival (the filters settle into the new field) to
 /// the departure: about 94 s of gait in the disturbed area.
-KneeRun run_knee(bool kinematic, const FilterSpec& filter = {}) {
-  const sim::ScenarioSpec spec = sim::load_scenario(std::string(BSN_SCENARIO_DIR) + "/fan_e_knee.yaml");
-  sim::ScenarioRunner runner(spec, {"thigh_l", "shank_l"}, false);
+/// The thigh and the shank of fan_e_knee with their true mountings (as after a perfect alignment), the knee in the
+/// plain or the kinematic mode.
+BodyModel knee_body(const sim::ScenarioRunner& runner, bool kinematic, const FilterSpec& filter) {
   BodyModel body;
   for (const std::string& name : runner.segment_names()) {
     SegmentSpec s;
@@ -185,6 +185,17 @@ KneeRun run_knee(bool kinematic, const FilterSpec& filter = {}) {
     body.segments.push_back(s);
   }
   EXPECT_EQ(body.segments[0].name, "thigh_l");
+  return body;
+}
+
+sim::ScenarioRunner knee_runner() {
+  return sim::ScenarioRunner(sim::load_scenario(std::string(BSN_SCENARIO_DIR) + "/fan_e_knee.yaml"),
+                             {"thigh_l", "shank_l"}, false);
+}
+
+KneeRun run_knee(bool kinematic, const FilterSpec& filter = {}) {
+  sim::ScenarioRunner runner = knee_runner();
+  const BodyModel body = knee_body(runner, kinematic, filter);
   BodyFusion fusion(body, {}, {}, 0);
   const std::array<std::pair<double, double>, 3> at_p2{{{14, 22}, {48, 76}, {102, 160}}};
   KneeRun run;
@@ -280,6 +291,38 @@ TEST(HingeHeading, KneeAnglesSurviveFanTestEWhileBothSegmentsHeadingsErr) {
   expect_the_kinematic_heading_holds(plain, kinematic);
   EXPECT_GT(kinematic.thigh_heading_rmse_deg, 10.0);
   EXPECT_GT(kinematic.shank_heading_rmse_deg, 10.0);
+}
+
+TEST(HingeHeading, ARestartedFilterOrANewAlignmentRestartsTheEstimate) {
+  // The offset is learnt between two filters' headings in given segment frames: a filter that restarts (a live
+  // calibration, a gap) or a segment frame that changes (an alignment) makes it stale.
+  sim::ScenarioRunner runner = knee_runner();
+  BodyFusion fusion(knee_body(runner, true, {}), {}, {}, 0);
+  std::vector<sim::ScenarioSample> out;
+  auto step = [&](std::uint64_t k) {
+    std::optional<HingeHeadingEstimator::State> heading;
+    if (!runner.next(out)) return heading;
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      const SampleResult& r = fusion.process({runner.segment_names()[i], k, out[i].sample}, out[i].sample.timestamp_ns);
+      if (r.joint) heading = r.joint->heading;
+    }
+    return heading;
+  };
+  std::uint64_t k = 0;
+  std::optional<HingeHeadingEstimator::State> heading;
+  for (; k < 300; ++k) heading = step(k);
+  ASSERT_TRUE(heading);
+  EXPECT_GT(heading->counted, 200u);  // standing at P1: the knee axis is horizontal, every sample counts
+  ASSERT_TRUE(fusion.update_alignment("thigh_l", *fusion.body().segments[0].sensor_to_segment));
+  heading = step(k++);
+  ASSERT_TRUE(heading);
+  EXPECT_EQ(heading->counted, 1u);
+  for (; k < 400; ++k) heading = step(k);
+  EXPECT_GT(heading->counted, 50u);
+  ASSERT_TRUE(fusion.update_calibration("shank_l", {}));
+  heading = step(k++);
+  ASSERT_TRUE(heading);
+  EXPECT_EQ(heading->counted, 1u);
 }
 
 }  // namespace

@@ -48,8 +48,9 @@ class HingeHeadingEstimator {
     /// quarter of its change.
     double window_s = 1.0;
     /// A sample counts only when the product of the two axes' horizontal lengths |a_h| |b_h| reaches this
-    /// (dimensionless, 0..1). Default 0.1: an axis within about 6 deg of vertical (|a_h| < 0.1) is left out, where
-    /// the heading about it is barely seen and 1 deg of inclination noise turns the estimate by 10 deg.
+    /// (dimensionless, 0..1). Default 0.1: with both segments agreeing, the axis within about 18 deg of vertical
+    /// (|a_h| = |b_h| < 0.32) is left out, where the heading about it is barely seen: an inclination error of e
+    /// turns the horizontal part of the axis by up to e / |a_h|, three times e there.
     double min_observability = 0.1;
     /// A step between two samples longer than this restarts the window, s: after a gap the filters may have
     /// re-initialised and their headings jumped. Default 1 s (the filters' max_gap_s).
