@@ -27,8 +27,9 @@
 // inclinations (the disturbance turns headings only, as in filters with a heading-only magnetometer correction); the
 // heading offset changes slowly against the window (the filters' heading time constants are seconds); and the axis is
 // away from vertical often enough (true in gait: the knee axis stays near horizontal). A real knee's ab/adduction and
-// axial rotation of a few degrees move the axes apart a little; averaged over the window with either sign, they bias
-// the estimate far less than their amplitude.
+// axial rotation of a few degrees move the axes apart: the estimate moves by up to their amplitude, less where they
+// change sign within the window (the simulator's knee is an exact hinge, so its tests do not show this). Near the
+// singularity Laidig et al. go further than this estimator, which only holds the last estimate there.
 //
 // Plain C++ + Eigen: Params (units, defaults, reasons), Coefficients derived from them, State; no allocation.
 #pragma once
