@@ -19,7 +19,8 @@
 namespace bsn::fusion {
 namespace {
 
-constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr double kPi = std::numbers::pi;
+constexpr double kDeg = kPi / 180.0;
 constexpr std::uint64_t kStepNs = 10'000'000;  // 100 Hz
 
 Quat about(const Vec3& axis, double angle) { return Quat(Eigen::AngleAxisd(angle, axis.normalized())); }
@@ -65,6 +66,24 @@ TEST(HingeHeading, RecoversTheHeadingOffsetOfAnExactHinge) {
   }
   // Both axes within 0.3 rad of horizontal: the windowed observability is above cos(0.3)^2.
   EXPECT_GT(est.state().observability, std::pow(std::cos(0.3), 2));
+}
+
+TEST(HingeHeading, AnApproximateHingeMovesTheEstimateByLessThanItsOwnMotion) {
+  // A knee also ab/adducts (here 3 deg) and rotates (5 deg) with the gait, at other frequencies than its flexion:
+  // the child's axis leaves the parent's by up to that much, so the offset errs by at most about that much (the
+  // horizontal part of the axis turns by at most the angle between the axes over |a_h|, near 1 here).
+  const double e_parent = -15.0 * kDeg, e_child = 20.0 * kDeg;
+  HingeHeadingEstimator est;
+  double worst = 0.0;
+  for (std::uint64_t k = 0; k < 3000; ++k) {
+    const HingeMotion m = hinge_at(k);
+    const double t = static_cast<double>(k) * 1e-2;
+    const Quat child = m.child * about(Vec3::UnitX(), 3.0 * kDeg * std::sin(2.9 * t)) *
+                       about(Vec3::UnitY(), 5.0 * kDeg * std::sin(5.8 * t + 1.0));
+    const auto& s = est.update(yaw(e_parent) * m.parent, yaw(e_child) * child, k * kStepNs);
+    if (k >= 300) worst = std::max(worst, std::abs(std::remainder(s.offset_rad - (e_parent - e_child), 2 * kPi)));
+  }
+  EXPECT_LT(worst, 5.0 * kDeg);
 }
 
 TEST(HingeHeading, HoldsTheEstimateWhileTheAxisIsVertical) {
