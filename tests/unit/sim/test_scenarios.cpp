@@ -179,6 +179,16 @@ TEST(SimScenarios, ValidationNamesFileLineAndKey) {
                     "offset_m: [0, 0.02, 0], moment_am2: [0, 0.01, 0]}\n")
                 .find("s.yaml:5: no segment 'foot_l'"),
             std::string::npos);
+  EXPECT_NE(
+      message("duration_s: 1\nbody:\n  kind: lower_body\n  gait: {speed_m_s: 1, active: [{from_s: 1, to_s: 2}]}\n")
+          .find("s.yaml:4: active windows need speed_m_s: 0"),
+      std::string::npos);
+  EXPECT_NE(message("duration_s: 1\nbody:\n  kind: lower_body\n  moves: [{by_m: [1, 0, 0], start_s: 0}]\n")
+                .find("s.yaml:4: 'moves' of a lower body needs a gait"),
+            std::string::npos);
+  EXPECT_NE(message("duration_s: 1\nbody:\n  kind: upper_body\n  moves: [{by_m: [1, 0, 0], start_s: 0}]\n")
+                .find("'moves' needs body kind free or lower_body"),
+            std::string::npos);
   EXPECT_NE(message("duration_s: 1\nmagnetic: {dip_deg: [1, 2}\n").find("s.yaml:"), std::string::npos);
   EXPECT_NE(message("duration_s: nan\n").find("duration_s must be"), std::string::npos);
   EXPECT_THROW(load_scenario("/nonexistent/x.yaml"), ScenarioError);
