@@ -44,6 +44,7 @@ void run_trial(std::uint64_t seed) {
     s.name = std::string("seg_") + kNodes[i];
     s.node = kNodes[i];
     if (i > 0) s.parent = body.segments.back().name;
+    if (i == 2) s.kinematic_heading = HingeHeadingEstimator::Params{};  // one joint plain, one kinematic
     s.filter.name = filters[rng() % filters.size()];
     body.segments.push_back(s);
   }
