@@ -31,6 +31,7 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
     segments_[i].gate = SampleGate(params.gate);
     if (const auto c = calibrations.find(spec.node); c != calibrations.end()) segments_[i].calibration = c->second;
     segments_[i].parent = body_.find_segment(spec.parent);
+    if (spec.kinematic_heading && segments_[i].parent) segments_[i].kinematic_heading.emplace(*spec.kinematic_heading);
     if (spec.sensor_to_segment) {
       segments_[i].sensor_to_segment = spec.sensor_to_segment->normalized();
       segments_[i].aligned = true;
@@ -119,17 +120,28 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
       parent_q_segment = segment_orientation(turned, parent->sensor_to_segment);
       parent_q = parent->aligned ? parent_q_segment : turned;
     }
-    const Quat relative = canonical(relative_orientation(parent_q, *seg.q));
+    Quat child_q = *seg.q, child_q_segment = *seg.q_segment;
+    std::optional<HingeHeadingEstimator::State> heading;
+    if (seg.kinematic_heading) {
+      // A restarted filter starts a new heading: the offset learnt against the old one no longer holds.
+      if (seg.flags.reinitialised || parent->flags.reinitialised) seg.kinematic_heading->reset();
+      heading = seg.kinematic_heading->update(parent_q_segment, child_q_segment, seg.timestamp_ns);
+      // A rotation about the earth's vertical: the same for the sensor and the segment frame.
+      child_q = seg.kinematic_heading->correct(child_q);
+      child_q_segment = seg.kinematic_heading->correct(child_q_segment);
+    }
+    const Quat relative = canonical(relative_orientation(parent_q, child_q));
     const JointConvention convention = joint_convention(spec);
     r.joint = JointEstimate{*seg.parent,
                             r.segment,
                             relative,
                             decompose(relative, spec.joint_axes),
                             convention,
-                            anatomical_angles(relative_orientation(parent_q_segment, *seg.q_segment), convention),
+                            anatomical_angles(relative_orientation(parent_q_segment, child_q_segment), convention),
                             parent->aligned && seg.aligned,
                             parent->stale || seg.stale,
-                            parent->flags.initialising || seg.flags.initialising};
+                            parent->flags.initialising || seg.flags.initialising,
+                            heading};
   }
   return r;
 }
@@ -152,6 +164,11 @@ std::optional<std::size_t> BodyFusion::update_alignment(std::string_view node, c
   Segment& seg = segments_[index->second];
   seg.sensor_to_segment = sensor_to_segment.normalized();
   seg.aligned = true;
+  // The hinge axes are given in segment frames: an offset learnt in the old frames no longer holds, for this
+  // segment's joint to its parent and for its children's joints.
+  if (seg.kinematic_heading) seg.kinematic_heading->reset();
+  for (Segment& other : segments_)
+    if (other.parent == index->second && other.kinematic_heading) other.kinematic_heading->reset();
   // The frames change: a child's joint must not pair its new frame with this segment's last one in the old frame.
   seg.q.reset();
   seg.q_segment.reset();

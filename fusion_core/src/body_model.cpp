@@ -1,5 +1,6 @@
 #include "bsn/fusion/body_model.hpp"
 
+#include <stdexcept>
 #include <unordered_map>
 
 namespace bsn::fusion {
@@ -36,6 +37,16 @@ std::optional<BodyModelProblem> check_body_model(const BodyModel& body) {
     const SegmentSpec& s = body.segments[i];
     if (!s.parent.empty() && !by_name.contains(s.parent)) {
       return BodyModelProblem{i, "segment '" + s.name + "' has unknown parent '" + s.parent + "'"};
+    }
+    if (s.kinematic_heading) {
+      if (s.parent.empty()) {
+        return BodyModelProblem{i, "segment '" + s.name + "': heading: kinematic needs a joint (a parent segment)"};
+      }
+      try {
+        s.kinematic_heading->check();
+      } catch (const std::invalid_argument& e) {
+        return BodyModelProblem{i, "segment '" + s.name + "': " + e.what()};
+      }
     }
   }
   // Walk up from every segment; more steps than segments means a cycle.

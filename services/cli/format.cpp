@@ -50,6 +50,7 @@ std::string format_flags(std::uint32_t f) {
   add(bsn::FLAG_INITIALISING, "initialising");
   add(bsn::FLAG_REINITIALISED, "reinitialised");
   add(bsn::FLAG_SEGMENT_FRAME, "segment_frame");
+  add(bsn::FLAG_HEADING_KINEMATIC, "heading_kinematic");
   return out.empty() ? "-" : out;
 }
 
@@ -83,9 +84,11 @@ std::string format_sample(const bsn::JointAngles& s) {
       out += " " + text(s.anatomical_names()[i]) + printf_string("=%.2f", s.anatomical()[i] * kDeg);
     out += " deg;";
   }
-  return out +
-         printf_string(" %s=[%8.2f %8.2f %8.2f] deg", text(s.axes()).c_str(), a[0] * kDeg, a[1] * kDeg, a[2] * kDeg) +
-         " flags=" + format_flags(s.flags());
+  out += printf_string(" %s=[%8.2f %8.2f %8.2f] deg", text(s.axes()).c_str(), a[0] * kDeg, a[1] * kDeg, a[2] * kDeg);
+  if (s.flags() & bsn::FLAG_HEADING_KINEMATIC)
+    out += printf_string(" heading_offset=%.2f deg observability=%.2f", s.heading_offset() * kDeg,
+                         s.heading_observability());
+  return out + " flags=" + format_flags(s.flags());
 }
 
 std::string format_non_finite(const bsn::Orientation& s, const char* prefix) {

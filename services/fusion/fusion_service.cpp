@@ -199,8 +199,10 @@ void FusionService::fill_joint(const fusion::JointEstimate& joint, std::uint64_t
   j.axes(child.joint_axes.name());
   j.angles({joint.angles.x(), joint.angles.y(), joint.angles.z()});
   j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u) |
-          (joint.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u));
+          (joint.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u) | (joint.heading ? bsn::FLAG_HEADING_KINEMATIC : 0u));
   dds::fill_anatomical(joint.convention, joint.anatomical, j);
+  j.heading_offset(joint.heading ? joint.heading->offset_rad : 0.0);
+  j.heading_observability(joint.heading ? joint.heading->observability : 0.0);
 }
 
 void FusionService::tick() {

@@ -52,6 +52,8 @@ void visit_fields(const bsn::JointAngles& s, FieldVisitor& v) {
     v.text(kNames[i], i < s.anatomical_names().size() ? s.anatomical_names()[i] : std::string());
     scalar(v, kValues[i], "rad", s.anatomical()[i]);
   }
+  scalar(v, "heading_offset", "rad", s.heading_offset());
+  scalar(v, "heading_observability", "1", s.heading_observability());
 }
 
 void visit_fields(const bsn::Status& s, FieldVisitor& v) {

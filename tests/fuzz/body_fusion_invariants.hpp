@@ -21,6 +21,12 @@ inline std::string check(const BodyFusion& fusion, const SampleResult& result, s
     if (result.joint) {
       if (!finite_unit(result.joint->relative)) return "a joint quaternion that is not a finite unit quaternion";
       if (!result.joint->angles.allFinite()) return "non-finite joint angles";
+      if (!result.joint->anatomical.allFinite()) return "non-finite anatomical angles";
+      if (const auto& h = result.joint->heading) {
+        if (!(std::abs(h->offset_rad) <= 3.15)) return "a kinematic heading offset that is not an angle in (-pi, pi]";
+        if (!(h->observability >= 0.0 && h->observability <= 1.0 + 1e-9))
+          return "a kinematic heading observability outside 0..1";
+      }
     }
   }
   std::uint64_t received = fusion.unknown_node_samples();

@@ -41,6 +41,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     s.name = std::string("seg_") + kNodes[i];
     s.node = kNodes[i];
     if (i > 0) s.parent = body.segments.back().name;
+    if (i == 2) s.kinematic_heading = HingeHeadingEstimator::Params{};  // one joint plain, one kinematic
     s.filter.name = filters[in.ConsumeIntegralInRange<std::size_t>(0, filters.size() - 1)];
     body.segments.push_back(s);
   }

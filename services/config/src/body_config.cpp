@@ -9,6 +9,7 @@
 #include <initializer_list>
 #include <map>
 #include <sstream>
+#include <stdexcept>
 #include <string_view>
 #include <vector>
 
@@ -108,6 +109,39 @@ class Parser : public config::YamlReader<ConfigError> {
     return r.normalized();
   }
 
+  // `heading: kinematic` (or `magnetometer`, the default), or `heading: {mode: kinematic, window_s: 1,
+  // min_observability: 0.1, max_step_s: 1}`: where the joint's child gets its heading relative to the parent.
+  std::optional<fusion::HingeHeadingEstimator::Params> heading(const YAML::Node& n) const {
+    if (n.IsMap()) {
+      check_keys(n, {"mode", "window_s", "min_observability", "max_step_s"}, "heading");
+      if (!n["mode"]) fail(n, "heading needs a mode (kinematic or magnetometer)");
+    } else if (!n.IsScalar()) {
+      fail(n,
+           "heading must be kinematic or magnetometer, or a map {mode: kinematic, window_s, min_observability, "
+           "max_step_s}");
+    }
+    // Not assigned later: assigning to a yaml-cpp Node that refers to another would overwrite that one.
+    const YAML::Node mode = n.IsMap() ? n["mode"] : n;
+    const std::string name = text(mode, "heading mode");
+    if (name == "magnetometer") {
+      if (n.IsMap() && n.size() > 1) fail(n, "heading: the magnetometer mode has no parameters");
+      return std::nullopt;
+    }
+    if (name != "kinematic") fail(mode, "heading mode '" + name + "' is not kinematic or magnetometer");
+    fusion::HingeHeadingEstimator::Params p;
+    if (n.IsMap()) {
+      if (n["window_s"]) p.window_s = number(n["window_s"], "window_s");
+      if (n["min_observability"]) p.min_observability = number(n["min_observability"], "min_observability");
+      if (n["max_step_s"]) p.max_step_s = number(n["max_step_s"], "max_step_s");
+    }
+    try {
+      p.check();
+    } catch (const std::invalid_argument& e) {
+      fail(n, e.what());
+    }
+    return p;
+  }
+
   // `calibration: FILE` (relative to the body file): loaded here only to report a bad file at its line; the
   // fusion service reads it again with load_body_calibrations().
   void check_calibration(const YAML::Node& n) const {
@@ -143,7 +177,7 @@ class Parser : public config::YamlReader<ConfigError> {
       require_map(s, "a segment");
       check_keys(s,
                  {"name", "node", "parent", "joint", "joint_axes", "anatomy", "side", "sensor_axes",
-                  "sensor_to_segment", "filter", "calibration"},
+                  "sensor_to_segment", "heading", "filter", "calibration"},
                  "segment");
       SegmentSpec spec;
       if (!s["name"]) fail(s, "segment without 'name'");
@@ -155,6 +189,11 @@ class Parser : public config::YamlReader<ConfigError> {
       spec.filter = s["filter"] ? filter(s["filter"], default_filter) : default_filter;
       if (s["anatomy"] || s["side"]) spec.anatomy = anatomy(s, fusion::joint_name(spec));
       if (s["sensor_axes"] || s["sensor_to_segment"]) spec.sensor_to_segment = mounting(s);
+      if (s["heading"]) {
+        if (spec.parent.empty())
+          fail(s["heading"], "heading applies to a joint: segment '" + spec.name + "' has no parent");
+        spec.kinematic_heading = heading(s["heading"]);
+      }
       if (s["calibration"]) check_calibration(s["calibration"]);
       model.segments.push_back(std::move(spec));
       lines.push_back(s.Mark().line + 1);
@@ -257,6 +296,17 @@ std::string body_model_to_yaml(const BodyModel& body) {
       const fusion::Quat& q = *s.sensor_to_segment;
       out << YAML::Key << "sensor_to_segment" << YAML::Value << YAML::Flow << YAML::BeginSeq << q.w() << q.x() << q.y()
           << q.z() << YAML::EndSeq;
+    }
+    if (const auto& h = s.kinematic_heading) {
+      const fusion::HingeHeadingEstimator::Params d;
+      out << YAML::Key << "heading" << YAML::Value;
+      if (h->window_s == d.window_s && h->min_observability == d.min_observability && h->max_step_s == d.max_step_s) {
+        out << "kinematic";
+      } else {
+        out << YAML::Flow << YAML::BeginMap << YAML::Key << "mode" << YAML::Value << "kinematic" << YAML::Key
+            << "window_s" << YAML::Value << h->window_s << YAML::Key << "min_observability" << YAML::Value
+            << h->min_observability << YAML::Key << "max_step_s" << YAML::Value << h->max_step_s << YAML::EndMap;
+      }
     }
     out << YAML::Key << "filter" << YAML::Value << YAML::Flow << YAML::BeginMap;
     out << YAML::Key << "name" << YAML::Value << s.filter.name;

@@ -1,5 +1,6 @@
 #include "bsn/sim/body.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -274,6 +275,13 @@ Body lower_body(const std::optional<Gait>& gait, const Pose& pose) {
     pelvis.translation[1].harmonics = {{0.02 * c, f, 0.0}};
     pelvis.translation[2].harmonics = {{0.02, 2.0 * f, 0.0}};
   }
+  if (gait) {
+    for (const ScriptedMove& m : gait->moves) {
+      for (int axis = 0; axis < 3; ++axis) {
+        if (m.by_m[axis] != 0.0) pelvis.translation[axis].steps.push_back({m.by_m[axis], m.start_s, m.duration_s});
+      }
+    }
+  }
   std::vector<SegmentDef> segs{pelvis};
   const Vec3 flex_axis(0.0, -1.0, 0.0);  // hip flexion and ankle dorsiflexion swing +x forward / toes up
   for (int side = 0; side < 2; ++side) {
@@ -318,6 +326,26 @@ Body lower_body(const std::optional<Gait>& gait, const Pose& pose) {
           step.angle.constant = 0.0;
         }
       }
+    }
+  }
+  if (gait && !moves && !gait->active.empty()) {
+    // Walking only within the windows: the harmonics (and the pelvis's sway) fade in and out with them, and each
+    // joint's mean angle steps in at a window's start and out at its end, so the body stands upright between.
+    for (SegmentDef& seg : segs) {
+      for (RevoluteStep& step : seg.rotation) {
+        if (step.angle.harmonics.empty()) continue;
+        step.angle.envelope = gait->active;
+        if (&seg == &segs[0] || step.angle.constant == 0.0) continue;
+        for (const Window& w : gait->active) {
+          const double ramp = std::max(w.ramp_s, 0.1);  // a step needs a duration
+          step.angle.steps.push_back({step.angle.constant, w.start_s, ramp});
+          step.angle.steps.push_back({-step.angle.constant, w.end_s, ramp});
+        }
+        step.angle.constant = 0.0;
+      }
+    }
+    for (Signal& axis : segs[0].translation) {
+      if (!axis.harmonics.empty()) axis.envelope = gait->active;
     }
   }
   return Body(std::move(segs));

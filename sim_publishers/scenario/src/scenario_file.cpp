@@ -196,8 +196,10 @@ class Parser : public config::YamlReader<ScenarioError> {
     auto only = [&](const char* key, BodyKind k, const char* kind_name) {
       if (n[key] && spec.body != k) fail(n[key], std::string("'") + key + "' needs body kind " + kind_name);
     };
-    for (const char* key : {"segment", "random", "rotations", "moves", "pose_sequence"})
-      only(key, BodyKind::kFree, "free");
+    for (const char* key : {"segment", "random", "rotations", "pose_sequence"}) only(key, BodyKind::kFree, "free");
+    if (n["moves"] && spec.body == BodyKind::kUpperBody) fail(n["moves"], "'moves' needs body kind free or lower_body");
+    if (n["moves"] && spec.body == BodyKind::kLowerBody && !n["gait"])
+      fail(n["moves"], "'moves' of a lower body needs a gait (e.g. gait: {speed_m_s: 0} to walk on the spot)");
     only("gait", BodyKind::kLowerBody, "lower_body");
     only("reaching", BodyKind::kUpperBody, "upper_body");
     if (n["mounting"] && spec.body == BodyKind::kFree)
@@ -253,7 +255,7 @@ class Parser : public config::YamlReader<ScenarioError> {
       }
     }
     if (const YAML::Node g = n["gait"]) {
-      check_keys(g, {"cadence_steps_per_min", "speed_m_s", "heading_deg", "alignment"}, "body.gait");
+      check_keys(g, {"cadence_steps_per_min", "speed_m_s", "heading_deg", "alignment", "active"}, "body.gait");
       Gait gait;
       if (g["cadence_steps_per_min"]) gait.cadence_steps_per_min = positive(g["cadence_steps_per_min"], "cadence");
       if (g["speed_m_s"]) gait.speed_m_s = non_negative(g["speed_m_s"], "speed_m_s");
@@ -270,6 +272,14 @@ class Parser : public config::YamlReader<ScenarioError> {
         }
         gait.alignment = moves;
       }
+      if (g["active"]) {
+        if (g["alignment"]) fail(g["active"], "give either alignment or active windows, not both");
+        if (gait.speed_m_s > 0.0)
+          fail(g["active"], "active windows need speed_m_s: 0 (walking on the spot; 'moves' carries the body)");
+        gait.active = windows(g["active"], "active", 1.0);
+      }
+      gait.moves = std::move(spec.free_motion.moves);  // the lower body's moves, parsed above
+      spec.free_motion.moves.clear();
       spec.gait = gait;
     }
     if (const YAML::Node r = n["reaching"]) {

@@ -44,6 +44,7 @@ void run_trial(std::uint64_t seed) {
     s.name = std::string("seg_") + kNodes[i];
     s.node = kNodes[i];
     if (i > 0) s.parent = body.segments.back().name;
+    if (i == 2) s.kinematic_heading = HingeHeadingEstimator::Params{};  // one joint plain, one kinematic
     s.filter.name = filters[rng() % filters.size()];
     body.segments.push_back(s);
   }
@@ -175,7 +176,7 @@ TEST(BodyFusionProperty, AnyInterleavingOfGoodAndHostileSamplesKeepsTheCountsAnd
 TEST(BodyFusionProperty, LossesInAStreamThatWrapsAreCountedExactly) {
   // Without hostile samples the missing count is exact, across the 2^64 wrap too.
   BodyModel body;
-  body.segments.push_back(SegmentSpec{"seg", "a", "", "", {}, {}, {}, {}});
+  body.segments.push_back(SegmentSpec{"seg", "a", "", "", {}, {}, {}, {}, {}});
   BodyFusion fusion(body, {}, BodyFusion::Params{}, 0);
   std::mt19937_64 rng(16);
   std::uint64_t seq = kTop - 300, t = 1'000'000'000, dropped = 0;

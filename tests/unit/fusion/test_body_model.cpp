@@ -122,6 +122,54 @@ TEST(BodyModel, BadAnatomyAndMountingNameTheirLine) {
   EXPECT_NE(e.find("unit quaternion"), std::string::npos) << e;
 }
 
+TEST(BodyModel, KinematicHeadingFromTheFile) {
+  const auto body = parse_body_model(R"(segments:
+  - name: thigh
+  - name: shank
+    parent: thigh
+    heading: kinematic
+  - name: foot
+    parent: shank
+    heading: {mode: kinematic, window_s: 2.5, min_observability: 0.2}
+  - name: toe
+    parent: foot
+    heading: magnetometer
+)",
+                                     "body.yaml");
+  ASSERT_EQ(body.segments.size(), 4u);
+  EXPECT_FALSE(body.segments[0].kinematic_heading);
+  ASSERT_TRUE(body.segments[1].kinematic_heading);
+  EXPECT_EQ(body.segments[1].kinematic_heading->window_s, fusion::HingeHeadingEstimator::Params{}.window_s);
+  ASSERT_TRUE(body.segments[2].kinematic_heading);
+  EXPECT_EQ(body.segments[2].kinematic_heading->window_s, 2.5);
+  EXPECT_EQ(body.segments[2].kinematic_heading->min_observability, 0.2);
+  EXPECT_FALSE(body.segments[3].kinematic_heading);
+  // Printed and read again, the modes and their parameters stay.
+  const auto again = parse_body_model(config::body_model_to_yaml(body), "generated");
+  ASSERT_TRUE(again.segments[1].kinematic_heading);
+  ASSERT_TRUE(again.segments[2].kinematic_heading);
+  EXPECT_EQ(again.segments[2].kinematic_heading->window_s, 2.5);
+  EXPECT_EQ(again.segments[2].kinematic_heading->min_observability, 0.2);
+  EXPECT_FALSE(again.segments[3].kinematic_heading);
+}
+
+TEST(BodyModel, BadKinematicHeadingNamesItsLine) {
+  const std::string head = "segments:\n  - name: a\n  - name: b\n    parent: a\n";
+  std::string e = error_of(head + "    heading: compass\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("'compass'"), std::string::npos) << e;
+  e = error_of(head + "    heading: {mode: kinematic, window_s: 0}\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("window_s"), std::string::npos) << e;
+  e = error_of(head + "    heading: {mode: kinematic, window: 2}\n");
+  EXPECT_NE(e.find("unknown key 'window'"), std::string::npos) << e;
+  e = error_of(head + "    heading: {window_s: 2}\n");
+  EXPECT_NE(e.find("needs a mode"), std::string::npos) << e;
+  e = error_of("segments:\n  - name: a\n    heading: kinematic\n");
+  EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;
+  EXPECT_NE(e.find("has no parent"), std::string::npos) << e;
+}
+
 TEST(BodyModel, UnknownKeyNamesFileLineAndKey) {
   const std::string e = error_of("segments:\n  - name: a\n    colour: red\n");
   EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 
@@ -13,7 +14,7 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
-Gait walking() { return Gait{110.0, 1.3, 30.0 * kDeg, std::nullopt}; }
+Gait walking() { return Gait{110.0, 1.3, 30.0 * kDeg, std::nullopt, {}, {}}; }
 
 // q' = 1/2 q (0, w_sensor): the derivative of a sensor-to-earth quaternion from the body rate.
 Eigen::Vector4d quat_rate(const Eigen::Vector4d& q, const Vec3& w) {
@@ -70,6 +71,38 @@ TEST(SimKinematics, GaitMovesEveryJointAndWalksAtTheConfiguredSpeed) {
   EXPECT_GT(peak_rate[3], 100.0 * kDeg);
   EXPECT_GT(peak_rate[3], peak_rate[1]);
   EXPECT_GT(peak_rate[0], 1.0 * kDeg);
+}
+
+TEST(SimKinematics, GaitInWindowsStandsUprightBetweenAndMovesWhereScripted) {
+  // Walking on the spot from 10 to 20 s (ramps of 0.5 s), carried 3 m east from 11 to 13 s.
+  Gait gait = walking();
+  gait.speed_m_s = 0.0;
+  gait.active = {Window{10.0, 20.0, 0.5}};
+  gait.moves = {ScriptedMove{Vec3(3.0, 0.0, 0.0), 11.0, 2.0}};
+  const Body body = lower_body(gait);
+  const std::size_t pelvis = *body.find("pelvis"), thigh = *body.find("thigh_l"), shank = *body.find("shank_l");
+  std::vector<SegmentState> s;
+  for (double t : {5.0, 9.9, 20.6, 30.0}) {
+    SCOPED_TRACE(t);
+    body.evaluate(t, s);
+    // Standing upright: no motion at all, and every segment parallel to the pelvis (the gait's mean angles out).
+    for (const SegmentState& seg : s) {
+      EXPECT_LT(seg.omega_earth.norm(), 1e-12);
+      EXPECT_LT(seg.velocity.norm(), 1e-12);
+      EXPECT_LT(fusion::angle_between(seg.q_segment, s[pelvis].q_segment), 1e-12);
+    }
+    EXPECT_NEAR(s[pelvis].origin.x(), t < 11.0 ? 0.0 : 3.0, 1e-12);
+  }
+  // Walking: the knee flexes (gait's mean 28 deg plus its harmonics) and the thigh swings.
+  double knee_min = 1e9, knee_max = -1e9;
+  for (double t = 14.0; t < 19.0; t += 0.01) {
+    body.evaluate(t, s);
+    const double knee = fusion::angle_between(s[thigh].q_segment, s[shank].q_segment);
+    knee_min = std::min(knee_min, knee);
+    knee_max = std::max(knee_max, knee);
+  }
+  EXPECT_GT(knee_max - knee_min, 30.0 * kDeg);
+  EXPECT_GT(knee_max, 40.0 * kDeg);
 }
 
 TEST(SimKinematics, AccelerometerAtRestEqualsRotatedGravity) {

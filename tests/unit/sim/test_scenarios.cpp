@@ -42,6 +42,10 @@ const std::vector<Expectation>& expectations() {
       // Test D: below typical magnitude thresholds (< 2 % of 49 uT), visible in the dip.
       {"fan_d", "imu", {1, 24.9}, {30, 60, 119}, 0.0, 0.02 * 49.0},
       {"fan_e", "imu", {5, 30, 40, 90, 184}, {17, 60, 130}},
+      // The lower body's version: the shank sensor is deep in the region, the thigh sensor in its fading top.
+      {"fan_e_knee", "shank_l", {5, 30, 40, 90, 184}, {17, 60, 130}},
+      {"fan_e_knee", "thigh_l", {5, 30, 40, 90, 184}, {17, 60, 130}},
+      {"fan_e_knee", "pelvis", {5, 17, 60, 130}, {}},
       {"seel_ruppin_3_1_weak", "imu", {1, 19.99}, {21, 79}, 50.0},
       {"seel_ruppin_3_1_strong", "imu", {1, 19.99}, {21, 79}, 179.0},
       {"seel_ruppin_3_2", "imu", {1, 19.99}, {21, 79}, 50.0},
@@ -75,7 +79,7 @@ TEST(SimScenarios, EveryShippedScenarioLoadsAndIsChecked) {
     EXPECT_NO_THROW(ScenarioRunner(spec, {}, false)) << stem;
     EXPECT_TRUE(checked.count(stem)) << stem << " has no disturbance expectations in this test";
   }
-  EXPECT_EQ(files, 15);
+  EXPECT_EQ(files, 16);
 }
 
 TEST(SimScenarios, DisturbancesShowWhereTheScenarioPutsThem) {
@@ -174,6 +178,16 @@ TEST(SimScenarios, ValidationNamesFileLineAndKey) {
   EXPECT_NE(message("duration_s: 1\nbody: {kind: upper_body}\nmagnetic:\n  attached_magnets:\n    - {segment: foot_l, "
                     "offset_m: [0, 0.02, 0], moment_am2: [0, 0.01, 0]}\n")
                 .find("s.yaml:5: no segment 'foot_l'"),
+            std::string::npos);
+  EXPECT_NE(
+      message("duration_s: 1\nbody:\n  kind: lower_body\n  gait: {speed_m_s: 1, active: [{from_s: 1, to_s: 2}]}\n")
+          .find("s.yaml:4: active windows need speed_m_s: 0"),
+      std::string::npos);
+  EXPECT_NE(message("duration_s: 1\nbody:\n  kind: lower_body\n  moves: [{by_m: [1, 0, 0], start_s: 0}]\n")
+                .find("s.yaml:4: 'moves' of a lower body needs a gait"),
+            std::string::npos);
+  EXPECT_NE(message("duration_s: 1\nbody:\n  kind: upper_body\n  moves: [{by_m: [1, 0, 0], start_s: 0}]\n")
+                .find("'moves' needs body kind free or lower_body"),
             std::string::npos);
   EXPECT_NE(message("duration_s: 1\nmagnetic: {dip_deg: [1, 2}\n").find("s.yaml:"), std::string::npos);
   EXPECT_NE(message("duration_s: nan\n").find("duration_s must be"), std::string::npos);

@@ -40,6 +40,10 @@ struct JointEstimate {
   bool aligned = false;            ///< both sensor-to-segment rotations are known (not the default mounting)
   bool stale = false;              ///< the parent's or the child's node is stale
   bool initialising = false;       ///< the parent's or the child's filter is initialising
+  /// With `heading: kinematic` on the joint: the estimator after this sample (its offset_rad turned the child
+  /// about the vertical before `relative`, `angles` and `anatomical` were computed; its observability says how
+  /// well the hinge axis showed the offset lately). nullopt: the plain mode, the filters' headings as they are.
+  std::optional<HingeHeadingEstimator::State> heading;
 };
 
 enum class SampleOutcome { kEstimated, kGateRejected, kFilterRejected, kUnknownNode };
@@ -109,6 +113,8 @@ class BodyFusion {
     std::optional<SourceId> source;
     std::optional<SourceId> conflicting_source;  ///< the last other writer rejected as kConflictingSource
     std::uint64_t source_handovers = 0;          ///< times another writer took the node over after it went stale
+    /// With `heading: kinematic`: the hinge heading estimator of the joint to the parent (axes in segment frames).
+    std::optional<HingeHeadingEstimator> kinematic_heading;
   };
 
   /// start_ns: the start on the arrival clock (monotonic, ns), from which the discovery grace runs.

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "bsn/fusion/anatomy.hpp"
+#include "bsn/fusion/hinge_heading.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rotation.hpp"
 
@@ -25,6 +26,11 @@ struct SegmentSpec {
   /// Rotation of the sensor's coordinates into the segment's ISB frame (a known mounting, or an alignment). nullopt:
   /// unknown; the anatomical angles assume default_sensor_to_segment() and orientations stay in the sensor frame.
   std::optional<Quat> sensor_to_segment;
+  /// How the joint to the parent gets the child's heading relative to the parent's. nullopt (the default): from
+  /// the two filters as they are (their magnetometers). Set (`heading: kinematic`, for a hinge-like joint): from
+  /// the hinge constraint, estimated with these parameters (hinge_heading.hpp); the joint's angles then use the
+  /// child's orientation turned about the vertical by the estimated offset.
+  std::optional<HingeHeadingEstimator::Params> kinematic_heading;
 };
 
 struct BodyModel {
@@ -42,7 +48,8 @@ struct BodyModelProblem {
 };
 
 /// Checks the rules: at least one segment; names and nodes non-empty, at most 63 characters and unique;
-/// every parent exists; no parent cycle. Returns the first problem found, or nullopt.
+/// every parent exists; no parent cycle; a kinematic heading only on a joint (a segment with a parent) and with valid
+/// parameters. Returns the first problem found, or nullopt.
 std::optional<BodyModelProblem> check_body_model(const BodyModel& body);
 
 /// Joint name of a segment: its explicit name, or "<parent>-<child>".

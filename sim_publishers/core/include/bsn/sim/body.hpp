@@ -181,6 +181,12 @@ struct Gait {
   double heading_rad = 0.0;  ///< walking direction, yaw of the pelvis (0 = east)
   /// First stand and flex, then walk on the spot (as on a treadmill: speed_m_s does not apply).
   std::optional<AlignmentMoves> alignment;
+  /// When the body walks; it stands upright outside these windows (the gait's mean angles step in and out with
+  /// the windows' ramps). Empty = always. Not with `alignment`.
+  std::vector<Window> active;
+  /// Moves of the whole body (the pelvis), earth frame, minimum-jerk: e.g. walking into a disturbed area and back
+  /// with speed_m_s 0 (Fan et al. 2018 test E carries the sensor between its two places so).
+  std::vector<ScriptedMove> moves;
 };
 /// Segments pelvis, thigh_l, shank_l, foot_l, thigh_r, shank_r, foot_r (segment x forward, y left, z up
 /// when standing). Without gait: standing still at `pose`.
