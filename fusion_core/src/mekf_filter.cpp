@@ -5,6 +5,8 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
+#include <utility>
 
 #include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/start_orientation.hpp"
@@ -49,6 +51,30 @@ int preset_index(std::string_view filter, double preset) {
                                 std::to_string(preset));
   }
   return static_cast<int>(preset);
+}
+
+// mekf_adaptive's per-class parameters, sigma_<g|bg|a|m>_<class>: sets the value and returns true, or returns false
+// for a name not of that form. Throws std::invalid_argument for that form with an unknown class.
+bool bind_class_parameter(const std::string& key, double value, std::array<MekfNoise, 4>& sets) {
+  static constexpr std::array<std::pair<std::string_view, double MekfNoise::*>, 4> kSigmas = {{
+      {"sigma_g_", &MekfNoise::sigma_g},
+      {"sigma_bg_", &MekfNoise::sigma_bg},
+      {"sigma_a_", &MekfNoise::sigma_a},
+      {"sigma_m_", &MekfNoise::sigma_m},
+  }};
+  for (const auto& [prefix, field] : kSigmas) {
+    if (!key.starts_with(prefix)) continue;
+    const std::string_view cls = std::string_view(key).substr(prefix.size());
+    for (std::size_t c = 0; c < kIntensityNames.size(); ++c) {
+      if (cls == kIntensityNames[c]) {
+        sets[c].*field = value;
+        return true;
+      }
+    }
+    throw std::invalid_argument("mekf_adaptive: parameter '" + key + "' names no intensity class '" + std::string(cls) +
+                                "' (the classes of Nez Table 1: static, slow, intermediate, fast)");
+  }
+  return false;
 }
 
 }  // namespace
@@ -142,16 +168,26 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
       r_adaption_(params.thresholds()) {
   const std::string_view n = adaptive ? "mekf_adaptive" : "mekf";
   coeff_.start_intensity = preset_index(n, params.preset);
-  coeff_.noise = kNezTable3[static_cast<std::size_t>(coeff_.start_intensity)];
-  const double overrides[] = {params.sigma_g, params.sigma_bg, params.sigma_a, params.sigma_m};
   const char* names[] = {"sigma_g", "sigma_bg", "sigma_a", "sigma_m"};
+  for (std::size_t c = 0; c < params.sets.size(); ++c) {
+    const MekfNoise& set = params.sets[c];
+    const double values[] = {set.sigma_g, set.sigma_bg, set.sigma_a, set.sigma_m};
+    for (int i = 0; i < 4; ++i) {
+      require_positive(n, values[i], (std::string(names[i]) + "_" + std::string(kIntensityNames[c])).c_str());
+    }
+  }
+  coeff_.sets = params.sets;
+  coeff_.noise = adaptive ? coeff_.sets[static_cast<std::size_t>(coeff_.start_intensity)]
+                          : kNezTable3[static_cast<std::size_t>(coeff_.start_intensity)];
+  const double overrides[] = {params.sigma_g, params.sigma_bg, params.sigma_a, params.sigma_m};
   double* targets[] = {&coeff_.noise.sigma_g, &coeff_.noise.sigma_bg, &coeff_.noise.sigma_a, &coeff_.noise.sigma_m};
   for (int i = 0; i < 4; ++i) {
     require_non_negative(n, overrides[i], names[i]);
     if (overrides[i] > 0.0) {
       if (adaptive) {
         throw std::invalid_argument("mekf_adaptive: parameter " + std::string(names[i]) +
-                                    " cannot be set; the adaptive filter takes every set from Table 3 (use preset)");
+                                    " cannot be set; the adaptive filter has one set per intensity class (set " +
+                                    names[i] + "_<static|slow|intermediate|fast>)");
       }
       *targets[i] = overrides[i];
     }
@@ -190,7 +226,7 @@ void MekfFilter::clear() {
 }
 
 MekfNoise MekfFilter::noise() const {
-  return adaptive_ ? kNezTable3[static_cast<std::size_t>(state_.intensity)] : coeff_.noise;
+  return adaptive_ ? coeff_.sets[static_cast<std::size_t>(state_.intensity)] : coeff_.noise;
 }
 
 void MekfFilter::set_reference(const Vec3& mag_earth) {
@@ -271,7 +307,7 @@ void MekfFilter::adapt(const ImuSample& s) {
     // and let it absorb external acceleration (on BROAD up to several rad/s). It is capped at what the new set's
     // random walk accumulates over one switch interval, by the congruence D P D (D scales the bias rows and
     // columns), which keeps P positive definite.
-    const double sigma_bg = kNezTable3[static_cast<std::size_t>(state_.intensity)].sigma_bg;
+    const double sigma_bg = coeff_.sets[static_cast<std::size_t>(state_.intensity)].sigma_bg;
     const double cap = sigma_bg * sigma_bg * coeff_.bias_cap_time_s;
     const double largest = state_.p.bottomRightCorner<3, 3>().diagonal().maxCoeff();
     if (state_.intensity <= static_cast<int>(MotionIntensity::kSlow) && largest > cap) {
@@ -434,7 +470,19 @@ std::unique_ptr<OrientationFilter> make_mekf_filter(const FilterSpec& spec) {
 }
 
 std::unique_ptr<OrientationFilter> make_mekf_adaptive_filter(const FilterSpec& spec) {
-  return std::make_unique<MekfFilter>(bind_parameters("mekf_adaptive", spec, kParams), true);
+  // The per-class sets are bound here, the other parameters by the shared table.
+  P params;
+  FilterSpec rest{spec.name, {}};
+  for (const auto& [key, value] : spec.parameters) {
+    if (!bind_class_parameter(key, value, params.sets)) rest.parameters.emplace_back(key, value);
+  }
+  try {
+    params = bind_parameters("mekf_adaptive", rest, kParams, params);
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string(e.what()) +
+                                "; the sets per class are sigma_<g|bg|a|m>_<static|slow|intermediate|fast>");
+  }
+  return std::make_unique<MekfFilter>(params, true);
 }
 
 }  // namespace bsn::fusion

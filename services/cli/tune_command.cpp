@@ -1,6 +1,7 @@
 // `bsn tune`: identify a filter's parameters on recordings with a reference orientation (Nez et al. 2018's
 // identification, with a global + local search instead of the exhaustive grid), with held-out scoring and
 // per-intensity sets.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -53,15 +54,15 @@ std::string deg(double rad) {
   return buf;
 }
 
-std::string filter_block(const eval::TuneSetup& setup, const eval::TuneResult& r) {
-  std::string s = "filter: {name: " + setup.base.name;
-  for (const auto& [k, v] : r.spec.parameters) s += ", " + k + ": " + fmt(v);
+std::string filter_block(const fusion::FilterSpec& spec) {
+  std::string s = "filter: {name: " + spec.name;
+  for (const auto& [k, v] : spec.parameters) s += ", " + k + ": " + fmt(v);
   return s + "}";
 }
 
 // One identification's report: the filter block, the range-end warnings, per-recording and criterion rows.
 std::string report(const eval::TuneSetup& setup, const eval::TuneResult& r, double seconds) {
-  std::string out = filter_block(setup, r) + "\n";
+  std::string out = filter_block(r.spec) + "\n";
   for (std::size_t d = 0; d < setup.ranges.size(); ++d) {
     const double u = r.optimiser.unit[d];
     if (u <= 0.0 || u >= 1.0) {
@@ -177,18 +178,19 @@ int run_tune(const TuneOptions& opt) {
   // One identification per class with --by-intensity (masks restrict the scored samples), else one.
   struct Job {
     std::string label;
+    int intensity = -1;                     ///< the class with --by-intensity
     std::vector<eval::TuneRecording> recs;  ///< with the class's mask
     std::size_t holdout = 0;
     std::string note;  ///< printed with the set's results
   };
   std::vector<Job> jobs;
   if (!opt.by_intensity) {
-    jobs.push_back({"", std::move(recordings), opt.holdout, ""});
+    jobs.push_back({"", -1, std::move(recordings), opt.holdout, ""});
   } else {
     std::vector<std::vector<std::uint8_t>> classes;
     for (const auto& t : recordings) classes.push_back(eval::intensity_classes(t.rec));
     for (int c = 0; c < 4; ++c) {
-      Job job{eval::intensity_name(c), {}, 0, ""};
+      Job job{eval::intensity_name(c), c, {}, 0, ""};
       std::size_t skipped = 0;
       for (std::size_t i = 0; i < recordings.size(); ++i) {
         eval::TuneRecording t{recordings[i].name, recordings[i].rec, {}};
@@ -220,6 +222,15 @@ int run_tune(const TuneOptions& opt) {
     }
   }
 
+  // Per-class mekf sets become mekf_adaptive's table; they were identified at the recordings' rate.
+  std::vector<eval::ClassSet> class_sets;
+  double rate_lo = std::numeric_limits<double>::infinity(), rate_hi = 0.0;
+  for (const Job& job : jobs) {
+    for (const auto& t : job.recs) {
+      rate_lo = std::min(rate_lo, t.rec.sampling_rate_hz);
+      rate_hi = std::max(rate_hi, t.rec.sampling_rate_hz);
+    }
+  }
   std::string json = "{\"sets\": [";
   for (std::size_t j = 0; j < jobs.size(); ++j) {
     Job& job = jobs[j];
@@ -246,8 +257,43 @@ int run_tune(const TuneOptions& opt) {
     std::string one = json_of(setup, r, seconds);
     if (!job.label.empty()) one.insert(1, "\"intensity\": " + io::json_string(job.label) + ", ");
     json += (j ? ", " : "") + one;
+    if (job.intensity >= 0 && setup.base.name == "mekf") class_sets.push_back({job.intensity, r.spec});
   }
-  json += "]}\n";
+  json += "]";
+  if (!class_sets.empty()) {
+    // mekf_adaptive scales sigma_a and sigma_m from table_rate_hz to the rate it runs at; recordings of different
+    // rates (more than 1 % apart) leave no single rate, so the sets are then taken as they are (0).
+    const bool one_rate = rate_hi <= rate_lo * 1.01;
+    fusion::FilterSpec adaptive;
+    try {
+      adaptive = eval::adaptive_spec_of(class_sets, one_rate ? rate_lo : 0.0);
+    } catch (const std::exception& e) {
+      return fail(e.what());
+    }
+    std::printf("\nmekf_adaptive with these sets (a class without a set keeps Nez Table 3):\n%s\n",
+                filter_block(adaptive).c_str());
+    for (int c = 0; c < 4; ++c) {
+      const bool has_set = std::any_of(class_sets.begin(), class_sets.end(),
+                                       [c](const eval::ClassSet& set) { return set.intensity == c; });
+      if (!has_set) {
+        std::printf(
+            "note: %s has no set and keeps Table 3's; with little of it in the recordings, consider the "
+            "nearest class's set for it (README, Tuning)\n",
+            eval::intensity_name(c));
+      }
+    }
+    if (!one_rate) {
+      std::printf("note: the recordings' rates differ (%.4g to %.4g Hz): table_rate_hz 0 uses the sets unscaled\n",
+                  rate_lo, rate_hi);
+    }
+    json += ", \"mekf_adaptive\": {\"name\": \"mekf_adaptive\", \"parameters\": {";
+    for (std::size_t i = 0; i < adaptive.parameters.size(); ++i) {
+      json += (i ? ", " : "") + io::json_string(adaptive.parameters[i].first) + ": " +
+              io::json_number(adaptive.parameters[i].second);
+    }
+    json += "}}";
+  }
+  json += "}\n";
   if (!opt.json_path.empty()) {
     std::ofstream out(opt.json_path);
     out << json;

@@ -112,6 +112,10 @@ TEST_F(TuneCommand, ByIntensityIdentifiesTheStaticClassOnItsOwn) {
   const std::string out = read_file(log_path("classes"));
   EXPECT_NE(out.find("intensity static:\nfilter: {name: mekf, sigma_g: "), std::string::npos) << out;
   EXPECT_NE(read_file(json).find("{\"intensity\": \"static\", \"filter\": \"mekf\""), std::string::npos);
+  // The per-class sets end as mekf_adaptive's table, at the recording's rate.
+  EXPECT_NE(out.find("filter: {name: mekf_adaptive, table_rate_hz: 100, sigma_g_static: "), std::string::npos) << out;
+  EXPECT_NE(read_file(json).find("\"mekf_adaptive\": {\"name\": \"mekf_adaptive\", \"parameters\": {"),
+            std::string::npos);
 }
 
 // tune's starting point: `bsn calibrate --allan` on the simulator's 30-minute static recording with a 50 Hz

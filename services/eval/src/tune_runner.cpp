@@ -165,8 +165,26 @@ std::vector<std::uint8_t> intensity_classes(const io::Recording& rec) {
 }
 
 const char* intensity_name(int c) {
-  static constexpr const char* kNames[] = {"static", "slow", "intermediate", "fast"};
-  return c >= 0 && c < 4 ? kNames[c] : "?";
+  // The names are string literals, so data() is null-terminated.
+  return c >= 0 && c < 4 ? fusion::kIntensityNames[static_cast<std::size_t>(c)].data() : "?";
+}
+
+fusion::FilterSpec adaptive_spec_of(const std::vector<ClassSet>& sets, double table_rate_hz) {
+  fusion::FilterSpec out{"mekf_adaptive", {{"table_rate_hz", table_rate_hz}}};
+  for (const ClassSet& c : sets) {
+    if (c.intensity < 0 || c.intensity > 3) {
+      throw std::invalid_argument("intensity class " + std::to_string(c.intensity) + " is not 0..3");
+    }
+    if (c.mekf.name != "mekf") throw std::invalid_argument("a class set must be a mekf spec, got " + c.mekf.name);
+    const auto filter = fusion::make_filter(c.mekf);
+    const fusion::MekfNoise n = dynamic_cast<const fusion::MekfFilter&>(*filter).noise();
+    const std::string cls(fusion::kIntensityNames[static_cast<std::size_t>(c.intensity)]);
+    out.parameters.emplace_back("sigma_g_" + cls, n.sigma_g);
+    out.parameters.emplace_back("sigma_bg_" + cls, n.sigma_bg);
+    out.parameters.emplace_back("sigma_a_" + cls, n.sigma_a);
+    out.parameters.emplace_back("sigma_m_" + cls, n.sigma_m);
+  }
+  return out;
 }
 
 io::Recording simulate_recording(const sim::ScenarioSpec& spec, bool ideal) {

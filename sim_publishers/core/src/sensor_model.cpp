@@ -93,6 +93,13 @@ std::optional<SensorErrors> sensor_preset(std::string_view name) {
     e.gyr.bias_instability = 3e-3;
     e.acc.white_density = 4e-3;
     e.mag.white_density = 0.2;
+    // APDM's sensor table for its monitors (apdm.com, Wearable-Sensors/Sapphire, "Sensor Characteristics"; the
+    // Sapphire is the Opal's logging sibling, the Opal's own sheet was not at hand): accelerometer range
+    // +-2 g or +-6 g; the larger, since Nez's fast motion (Table 1: 4 +- 2 g) reaches it. The same table gives a
+    // 50 Hz bandwidth on all three channels, i.e. no lag of the magnetometer behind the gyro: mag_bandwidth_hz and
+    // mag_delay_samples stay 0 (the simulator would filter the magnetometer alone; README, Tuning, for the
+    // experiment).
+    e.acc.range = 6.0 * fusion::kGravity;
     return e;
   }
   if (name == "zhang_yang_table1") {

@@ -5,8 +5,10 @@
 #include <cmath>
 #include <limits>
 
+#include "bsn/config/body_config.hpp"
 #include "bsn/eval/tune_runner.hpp"
 #include "bsn/eval/tuning.hpp"
+#include "bsn/fusion/mekf_filter.hpp"
 #include "bsn/sim/scenario_file.hpp"
 
 namespace bsn::eval {
@@ -213,6 +215,36 @@ TEST(TuneRunner, IntensityClassesFollowTheScenarios) {
   }
   EXPECT_EQ(at_rest_static, rest);
   EXPECT_GT(moving_fast, moving / 2);
+}
+
+// `bsn tune --by-intensity` on mekf turns its per-class sets into mekf_adaptive's table: the block, written into
+// a body file as the command prints it, loads and gives the filter exactly those sets (a set that was not fully
+// identified is completed from its mekf preset, as the identification ran it), the other classes keep Table 3.
+TEST(TuneByIntensity, AdaptiveBlockLoadsIntoTheBodyFileAndSetsTheClasses) {
+  const std::vector<ClassSet> sets = {
+      {2, {"mekf", {{"sigma_g", 0.00562}, {"sigma_bg", 0.000141}, {"sigma_a", 12.9}, {"sigma_m", 3.16}}}},
+      {3, {"mekf", {{"preset", 3}, {"sigma_a", 15.8}}}},
+  };
+  const fusion::FilterSpec spec = adaptive_spec_of(sets, 286.0);
+  std::string block = "{name: " + spec.name;
+  for (const auto& [k, v] : spec.parameters) block += ", " + k + ": " + std::to_string(v);
+  const auto body =
+      config::parse_body_model("segments:\n  - name: hand\n    node: imu\n    filter: " + block + "}\n", "body.yaml");
+  const auto filter = fusion::make_filter(body.segments.at(0).filter);
+  const auto& m = dynamic_cast<const fusion::MekfFilter&>(*filter);
+  EXPECT_EQ(m.params().table_rate_hz, 286.0);
+  const auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * b; };  // to_string's 6 decimals
+  EXPECT_TRUE(near(m.sets()[2].sigma_g, 0.00562) && near(m.sets()[2].sigma_bg, 0.000141) &&
+              near(m.sets()[2].sigma_a, 12.9) && near(m.sets()[2].sigma_m, 3.16));
+  const fusion::MekfNoise& fast = fusion::kNezTable3[3];
+  EXPECT_TRUE(near(m.sets()[3].sigma_g, fast.sigma_g) && near(m.sets()[3].sigma_a, 15.8) &&
+              near(m.sets()[3].sigma_m, fast.sigma_m));
+  for (const std::size_t c : {0u, 1u}) {
+    EXPECT_EQ(m.sets()[c].sigma_a, fusion::kNezTable3[c].sigma_a);
+    EXPECT_EQ(m.sets()[c].sigma_m, fusion::kNezTable3[c].sigma_m);
+  }
+  EXPECT_THROW(adaptive_spec_of({{4, {"mekf", {}}}}, 128.0), std::invalid_argument);
+  EXPECT_THROW(adaptive_spec_of({{1, {"seel_ruppin", {}}}}, 128.0), std::invalid_argument);
 }
 
 }  // namespace

@@ -7,7 +7,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "bsn/fusion/mekf_filter.hpp"
@@ -243,6 +245,51 @@ TEST(Mekf, FactoryPresetSelectsTheNoiseSetAndMakesTheAdaptiveVariant) {
   EXPECT_EQ(dynamic_cast<MekfFilter&>(*f).noise().sigma_m, 45.0);
   EXPECT_EQ(make_filter({"mekf_adaptive", {}})->name(), "mekf_adaptive");
   EXPECT_THROW(make_filter({"mekf_adaptive", {{"sigma_g", 0.1}}}), std::invalid_argument);
+}
+
+std::string factory_error(const FilterSpec& spec) {
+  try {
+    (void)make_filter(spec);
+  } catch (const std::invalid_argument& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// mekf_adaptive's sets are parameters, sigma_<g|bg|a|m>_<class>: a given value replaces that class's Table 3 entry
+// and only that one, and the filter then runs on it; plain mekf has one set and does not take them.
+TEST(Mekf, AdaptiveTakesASetPerClass) {
+  const auto f = make_filter({"mekf_adaptive", {{"sigma_a_fast", 3.5}, {"sigma_m_fast", 20}, {"sigma_g_slow", 0.02}}});
+  const auto& m = dynamic_cast<const MekfFilter&>(*f);
+  for (std::size_t c = 0; c < 4; ++c) {
+    const MekfNoise want{c == 1 ? 0.02 : kNezTable3[c].sigma_g, kNezTable3[c].sigma_bg,
+                         c == 3 ? 3.5 : kNezTable3[c].sigma_a, c == 3 ? 20.0 : kNezTable3[c].sigma_m};
+    EXPECT_EQ(m.sets()[c].sigma_g, want.sigma_g) << kIntensityNames[c];
+    EXPECT_EQ(m.sets()[c].sigma_bg, want.sigma_bg) << kIntensityNames[c];
+    EXPECT_EQ(m.sets()[c].sigma_a, want.sigma_a) << kIntensityNames[c];
+    EXPECT_EQ(m.sets()[c].sigma_m, want.sigma_m) << kIntensityNames[c];
+  }
+  // It starts with the preset's class (3, fast), so the set in use is the given one.
+  EXPECT_EQ(m.noise().sigma_a, 3.5);
+  EXPECT_EQ(m.noise().sigma_m, 20.0);
+  EXPECT_NE(factory_error({"mekf", {{"sigma_a_fast", 3.5}}}).find("has no parameter 'sigma_a_fast'"),
+            std::string::npos);
+}
+
+TEST(Mekf, AdaptiveSetErrorsNameTheParameterAndTheClasses) {
+  for (const char* key : {"sigma_a_medium", "sigma_m_2", "sigma_bg_"}) {
+    const std::string e = factory_error({"mekf_adaptive", {{key, 1.0}}});
+    EXPECT_NE(e.find(std::string("'") + key + "'"), std::string::npos) << e;
+    EXPECT_NE(e.find("static, slow, intermediate, fast"), std::string::npos) << e;
+  }
+  for (const double bad :
+       {0.0, -1.0, std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()}) {
+    const std::string e = factory_error({"mekf_adaptive", {{"sigma_g_intermediate", bad}}});
+    EXPECT_NE(e.find("sigma_g_intermediate must be a finite value > 0"), std::string::npos) << bad << ": " << e;
+  }
+  // An unknown name of another form still lists the per-class form beside the known names.
+  EXPECT_NE(factory_error({"mekf_adaptive", {{"sigmaa_fast", 1.0}}}).find("sigma_<g|bg|a|m>_<static|slow"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -33,10 +33,12 @@ TEST(SimSensorModel, EveryPresetExistsAndUnknownIsRejected) {
 
 TEST(SimSensorModel, OpalPresetIsNezTable2) {
   const SensorErrors e = *sensor_preset("opal");
-  EXPECT_EQ(e.gyr.white_density, 1e-3);     // sigma_g, rad/s
-  EXPECT_EQ(e.gyr.bias_instability, 3e-3);  // sigma_bg, rad/s
-  EXPECT_EQ(e.acc.white_density, 4e-3);     // sigma_a, m/s^2
-  EXPECT_EQ(e.mag.white_density, 0.2);      // sigma_m, uT
+  EXPECT_EQ(e.gyr.white_density, 1e-3);                   // sigma_g, rad/s
+  EXPECT_EQ(e.gyr.bias_instability, 3e-3);                // sigma_bg, rad/s
+  EXPECT_EQ(e.acc.white_density, 4e-3);                   // sigma_a, m/s^2
+  EXPECT_EQ(e.mag.white_density, 0.2);                    // sigma_m, uT
+  EXPECT_DOUBLE_EQ(e.acc.range, 6.0 * fusion::kGravity);  // APDM: +-6 g
+  EXPECT_EQ(e.mag_bandwidth_hz, 0.0);  // the same 50 Hz on every channel: no relative magnetometer lag
 }
 
 TEST(SimSensorModel, MagnetometerFollowsZhangYangEquation8) {

@@ -4,7 +4,8 @@
 //  - Suh's two-step update: the accelerometer corrects attitude and bias, then the magnetometer corrects the yaw
 //    only, through the gain projection r3 r3^T and the covariance truncated to its attitude block;
 //  - Q and R from sigma_g, sigma_bg, sigma_a, sigma_m, with the paper's Table 3 as presets;
-//  - an adaptive variant ("mekf_adaptive") that picks the Table 3 set by motion intensity, from the instantaneous
+//  - an adaptive variant ("mekf_adaptive") that picks a set by motion intensity (Table 3 by default, or the user's
+//    own per-class sets, e.g. from `bsn tune --by-intensity`), from the instantaneous
 //    acceleration and angular rate, and never switches twice within min_switch_interval_s (10 s in the paper).
 //    Each set is used only within the range of Table 1 it was identified on, a change is confirmed on the highest
 //    class seen over switch_confirm_s, the sets' per-sample sigma_a and sigma_m are scaled from 128 Hz to the
@@ -42,6 +43,8 @@ struct MekfNoise {
 
 /// Nez et al. Table 3 (identified at 128 Hz on APDM Opal sensors), index = intensity.
 enum class MotionIntensity : int { kStatic = 0, kSlow = 1, kIntermediate = 2, kFast = 3 };
+/// The classes' names, index = intensity: the suffix of mekf_adaptive's per-class parameters (sigma_a_fast).
+inline constexpr std::array<std::string_view, 4> kIntensityNames = {"static", "slow", "intermediate", "fast"};
 inline constexpr std::array<MekfNoise, 4> kNezTable3 = {{
     {0.1, 1e-4, 0.2, 10.0},    // static
     {1e-3, 1e-4, 0.2, 1.5},    // slow
@@ -81,7 +84,7 @@ class MekfFilter final : public OrientationFilter {
     /// more are too stiff for BROAD's 286 Hz and fast trials. For "mekf_adaptive" it is the set it starts with.
     double preset = 3.0;
     /// Overrides of the preset's values (MekfNoise has the meaning and units); 0 = take the preset's value.
-    /// Not allowed for "mekf_adaptive", which always uses Table 3. Defaults 0.
+    /// Not allowed for "mekf_adaptive", which has one set per class (below). Defaults 0.
     double sigma_g = 0.0;
     double sigma_bg = 0.0;
     double sigma_a = 0.0;
@@ -117,10 +120,16 @@ class MekfFilter final : public OrientationFilter {
     /// so at f Hz the adaptive filter scales them by sqrt(f / table_rate_hz): the accelerometer and magnetometer
     /// then carry the same information per second as in the paper. 0 = use them as they are. Default 128.
     double table_rate_hz = 128.0;
+    /// The adaptive variant's set per intensity class (MekfNoise has the meaning and units; each must be finite and
+    /// > 0), named sigma_<g|bg|a|m>_<class>, e.g. sigma_a_fast. Defaults: Nez Table 3 (kNezTable3), identified on
+    /// APDM Opal sensors at 128 Hz; `bsn tune --by-intensity` identifies a sensor's own. Only "mekf_adaptive" takes
+    /// them ("mekf" uses preset and the overrides above).
+    std::array<MekfNoise, 4> sets = kNezTable3;
   };
 
   struct Coefficients {
-    MekfNoise noise;  ///< the fixed set (non-adaptive) or the starting set (adaptive)
+    MekfNoise noise;                ///< the fixed set (non-adaptive) or the starting set (adaptive)
+    std::array<MekfNoise, 4> sets;  ///< the adaptive variant's set per class (Params::sets, checked)
     std::uint64_t intensity_hold_ns = 0;
     std::uint64_t min_switch_interval_ns = 0;
     std::uint64_t switch_confirm_ns = 0;
@@ -136,7 +145,7 @@ class MekfFilter final : public OrientationFilter {
     bool have_w_prev = false;
     Vec3 h_ref = Vec3::Zero();                  ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
     MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
-    int intensity = 1;                          ///< index into kNezTable3 in use
+    int intensity = 1;                          ///< index into Coefficients::sets in use
     std::uint64_t last_switch_ns = 0;
     std::array<std::uint64_t, 4> class_seen_ns{};  ///< last time each intensity class was observed
     std::array<bool, 4> class_seen{};
@@ -158,8 +167,10 @@ class MekfFilter final : public OrientationFilter {
 
   /// Error-state covariance of [dtheta (sensor frame, rad), db (rad/s)].
   const mekf::Mat6& covariance() const { return state_.p; }
-  /// The Table 3 set in use (0..3).
+  /// The intensity class whose set is in use (0..3).
   int intensity() const { return state_.intensity; }
+  /// The adaptive variant's sets per class (Table 3 unless set).
+  const std::array<MekfNoise, 4>& sets() const { return coeff_.sets; }
   /// The noise set in use.
   MekfNoise noise() const;
   const Params& params() const { return params_; }
@@ -183,7 +194,8 @@ class MekfFilter final : public OrientationFilter {
   State state_;
 };
 
-/// Factory entries: "mekf" (fixed set) and "mekf_adaptive", with the Params fields as parameter names.
+/// Factory entries: "mekf" (fixed set) and "mekf_adaptive", with the Params fields as parameter names (the sets' as
+/// sigma_<g|bg|a|m>_<class>; a name of that form with an unknown class is an error naming the classes).
 std::unique_ptr<OrientationFilter> make_mekf_filter(const FilterSpec& spec);
 std::unique_ptr<OrientationFilter> make_mekf_adaptive_filter(const FilterSpec& spec);
 

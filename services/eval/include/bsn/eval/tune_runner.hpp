@@ -70,6 +70,19 @@ TuneResult tune(const TuneSetup& setup, const OptimiserProgress& progress = {});
 std::vector<std::uint8_t> intensity_classes(const io::Recording& rec);
 const char* intensity_name(int c);
 
+/// One class's set as `bsn tune --by-intensity` identifies it: a "mekf" spec fitted on that class's samples.
+struct ClassSet {
+  int intensity = 0;        ///< 0 static .. 3 fast
+  fusion::FilterSpec mekf;  ///< name "mekf" with the identified (and fixed) parameters
+};
+
+/// The mekf_adaptive spec that uses the given classes' sets (sigma_<g|bg|a|m>_<class>: all four sigmas each "mekf"
+/// spec ends up with, its preset filling what was not identified); classes not given keep Table 3. table_rate_hz is
+/// the rate the sets were identified at (mekf_adaptive scales sigma_a and sigma_m from it to the rate it runs at),
+/// 0 = use them as they are. Throws std::invalid_argument for a spec that is not a valid "mekf" or a class outside
+/// 0..3.
+fusion::FilterSpec adaptive_spec_of(const std::vector<ClassSet>& sets, double table_rate_hz);
+
 /// A simulated recording of one segment of a scenario (the sensors as the scenario sets them, or exact with
 /// `ideal`), with the truth as reference, the scenario's movement windows, per-sample timestamps and NaN
 /// magnetometer rows where the magnetometer gave no sample. Dropped samples are left out.
