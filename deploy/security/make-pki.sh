@@ -2,7 +2,7 @@
 # Makes a DDS-Security PKI for bsn with openssl: one certificate authority, one identity per process, and the
 # governance and permissions documents signed by that authority.
 #
-#   deploy/security/make-pki.sh OUT_DIR [NAME:ROLE ...]
+#   deploy/security/make-pki.sh [--submessages encrypt|sign|none] OUT_DIR [NAME:ROLE ...]
 #
 # ROLE is one of
 #   sensor       publishes bsn/raw (and bsn/truth/orientation and bsn/truth/joint_angles, for simulators)
@@ -17,11 +17,24 @@
 # OUT_DIR/NAME holding what `bsn ... --security OUT_DIR/NAME` reads: ca.pem, cert.pem, key.pem, governance.p7s,
 # permissions.p7s. OUT_DIR/ca holds the authority's key: keep it off the lab machines. Running the script again
 # with new identities keeps the existing authority and re-signs the permissions for all of them.
+#
+# Every sample's payload is encrypted and authenticated (AES-GCM) in any case, and discovery is encrypted.
+# --submessages chooses what also protects the RTPS submessage around each payload (writer id, sequence number):
+# none (the default), sign (a MAC) or encrypt (a second AES-GCM pass). The README's DDS-Security section gives what
+# each costs (encrypt doubles the fusion service's CPU per sample) and what it adds.
 set -euo pipefail
 
 usage() { sed -n '2,/^set -e/p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; }
+submessages=none
+if [ "${1:-}" = "--submessages" ]; then
+  case ${2:-} in
+    encrypt|sign|none) submessages=$2; shift 2 ;;
+    *) echo "make-pki: error: --submessages takes encrypt, sign or none, not '${2:-}'" >&2; exit 2 ;;
+  esac
+fi
 if [ $# -lt 1 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then usage; exit 2; fi
 out=$1; shift
+metadata_protection=$(echo "$submessages" | tr '[:lower:]' '[:upper:]')
 identities=("$@")
 [ ${#identities[@]} -gt 0 ] || identities=(sensor:sensor fusion:fusion calibration:calibration viewer:viewer
                                             operator:operator recorder:recorder)
@@ -82,7 +95,7 @@ cat > "$out/ca/governance.xml" <<XML
           <enable_liveliness_protection>true</enable_liveliness_protection>
           <enable_read_access_control>true</enable_read_access_control>
           <enable_write_access_control>true</enable_write_access_control>
-          <metadata_protection_kind>ENCRYPT</metadata_protection_kind>
+          <metadata_protection_kind>$metadata_protection</metadata_protection_kind>
           <data_protection_kind>ENCRYPT</data_protection_kind>
         </topic_rule>
       </topic_access_rules>

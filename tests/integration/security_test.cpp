@@ -11,9 +11,11 @@
 #include <netinet/udp.h>
 #include <poll.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -141,6 +143,34 @@ class Security : public ProcessTest {
   }
   std::filesystem::path pki_;
 };
+
+// Every payload is encrypted whatever --submessages says; it chooses only what also protects the submessage around
+// the payload (the default, none, halves the fusion service's crypto work per sample; README: DDS-Security).
+TEST_F(Security, MakePkiEncryptsEveryPayloadAndChoosesTheSubmessageProtection) {
+  const std::string governance = read_file((pki_ / "ca" / "governance.xml").string());
+  EXPECT_NE(governance.find("<data_protection_kind>ENCRYPT</data_protection_kind>"), std::string::npos);
+  EXPECT_NE(governance.find("<metadata_protection_kind>NONE</metadata_protection_kind>"), std::string::npos);
+  EXPECT_NE(governance.find("<discovery_protection_kind>ENCRYPT</discovery_protection_kind>"), std::string::npos);
+  const std::string script = std::string(BSN_DEPLOY_DIR) + "/security/make-pki.sh";
+  for (const std::string kind : {"sign", "encrypt"}) {
+    const std::filesystem::path other = dir() / ("pki-" + kind);
+    ASSERT_EQ(std::system(
+                  (script + " --submessages " + kind + " '" + other.string() + "' viewer:viewer > /dev/null").c_str()),
+              0);
+    std::string upper = kind;
+    for (char& c : upper) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    EXPECT_NE(read_file((other / "ca" / "governance.xml").string())
+                  .find("<metadata_protection_kind>" + upper + "</metadata_protection_kind>"),
+              std::string::npos)
+        << kind;
+  }
+  const int bad = std::system((script + " --submessages secret '" + (dir() / "pki-bad").string() + "' > '" +
+                               (dir() / "pki-bad.log").string() + "' 2>&1")
+                                  .c_str());
+  EXPECT_EQ(WEXITSTATUS(bad), 2);
+  EXPECT_NE(read_file((dir() / "pki-bad.log").string()).find("--submessages takes encrypt, sign or none"),
+            std::string::npos);
+}
 
 TEST_F(Security, AuthorisedRolesFlowAndOutsidersGetNothing) {
   const int domain = test_domain(30);
