@@ -236,7 +236,7 @@ bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const 
     state_.mag_learning_count += 1.0;
     if (t_ns - state_.mag_learning_since_ns >= coeff_.mag_reference_ns) {
       mag_detector_.set_reference(state_.mag_norm_sum / state_.mag_learning_count,
-                                  state_.mag_dip_sum / state_.mag_learning_count);
+                                  state_.mag_dip_sum / state_.mag_learning_count, params_.mag_reference_s);
       state_.mag_learning = false;
     }
     return false;

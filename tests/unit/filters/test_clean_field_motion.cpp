@@ -143,19 +143,19 @@ bool is_one_of(const FilterInfo& info, std::initializer_list<const char*> names)
 // check is reported as skipped with the measured figure, never as passed, and passes as soon as the bound holds.
 bool known_to_miss(const FilterInfo& info, const char* test) {
   if (std::string(test) == "translation") return is_one_of(info, {"complementary", "ekf", "mekf", "mekf_adaptive"});
-  if (std::string(test) == "long rejection") return is_one_of(info, {"mekf", "mekf_adaptive"});
+  if (std::string(test) == "long rejection") return is_one_of(info, {"mekf_adaptive"});
   return false;
 }
 
 // The filters whose rejection can be forced on by its thresholds, with those parameters (a band of 1e-6 that any
 // noise leaves; no new reference, no reduced-gain acceptance).
 std::vector<std::pair<std::string, double>> always_rejecting(const FilterInfo& info) {
-  if (is_one_of(info, {"seel_ruppin", "iecf"})) {
-    return {
-        {"mag_norm_enter", 1e-6}, {"mag_norm_leave", 1e-6}, {"mag_max_rejection_s", 1e6}, {"mag_accept_after_s", 1e6}};
-  }
-  if (is_one_of(info, {"ekf", "mekf", "mekf_adaptive", "dlkf"})) {
-    return {{"mag_magnitude_enter", 1e-6}, {"mag_magnitude_exit", 1e-6}, {"mag_accept_after_s", 1e6}};
+  if (is_one_of(info, {"seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"})) {
+    return {{"mag_norm_enter", 1e-6},
+            {"mag_norm_leave", 1e-6},
+            {"mag_reference_tau_s", 1e6},
+            {"mag_max_rejection_s", 1e6},
+            {"mag_accept_after_s", 1e6}};
   }
   return {};
 }
