@@ -23,7 +23,7 @@ MagDisturbanceDetector::MagDisturbanceDetector(const Params& params) : params_(p
   require_non_negative(kName, params.mag_latency_s, "mag_latency_s");
   require_non_negative(kName, params.mag_lowpass_tau_s, "mag_lowpass_tau_s");
   require_positive(kName, params.mag_reference_tau_s, "mag_reference_tau_s");
-  require_positive(kName, params.mag_max_rejection_s, "mag_max_rejection_s");
+  require_non_negative(kName, params.mag_max_rejection_s, "mag_max_rejection_s");
   require_positive(kName, params.mag_accept_after_s, "mag_accept_after_s");
   if (!(params.mag_reduced_gain >= 0.0 && params.mag_reduced_gain <= 1.0)) {
     throw std::invalid_argument(std::string(kName) + ": parameter mag_reduced_gain must be in [0, 1], got " +
@@ -115,7 +115,7 @@ void MagDisturbanceDetector::track_disturbance(std::uint64_t t_ns, double dt_s) 
     state_.candidate_norm = norm;
     state_.candidate_dip = dip;
     state_.candidate_since_ns = t_ns;
-  } else if (t_ns - state_.candidate_since_ns >= max_rejection_ns_) {
+  } else if (max_rejection_ns_ > 0 && t_ns - state_.candidate_since_ns >= max_rejection_ns_) {
     set_reference(state_.candidate_norm, state_.candidate_dip);
     state_.disturbed = false;
     state_.inside_leave_band = true;
