@@ -16,8 +16,8 @@
 // the sensor frame. Magnetometer rejection (MagneticRAdaption, the shared MagDisturbanceDetector) as in the EKF:
 // low-passed magnitude and dip, lag-tolerant dip test, a steady new field adopted after 20 s, the reading used again
 // at four times its variance after 60 s of rejection; while it is rejected the accelerometer update drops P's
-// correlations of the heading and of the vertical bias with the rest, so it cannot turn the heading (no turn about
-// the vertical, no bias change along it) and P stays consistent with what it did.
+// correlations of the heading and of the bias with the tilt, so it turns neither the heading nor the bias, and P
+// stays consistent with what it did.
 #pragma once
 
 #include <Eigen/Core>
