@@ -79,7 +79,14 @@ UpdateResult IecfFilter::start(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
-UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
+UpdateResult IecfFilter::step(const ImuSample& s_in, double dt) {
+  // The magnetometer reading brought forward by its own delay behind the gyro (lag_compensated, mag_latency_s), so
+  // that a fast turn does not pull the heading towards where the sensor pointed that long ago.
+  ImuSample s_fwd = s_in;
+  if (s_in.has_mag && s_in.has_gyr && params_.mag_latency_s > 0.0) {
+    s_fwd.mag = lag_compensated(s_in.mag, s_in.gyr - bias_.bias(), params_.mag_latency_s);
+  }
+  const ImuSample& s = s_fwd;
   const std::uint64_t dt_ns = s.timestamp_ns - clock().last_ns;
   const std::uint64_t since_init_ns = s.timestamp_ns - clock().init_ns;
   const double gain =

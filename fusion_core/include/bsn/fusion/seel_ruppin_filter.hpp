@@ -68,16 +68,10 @@ class SeelRuppinFilter final : public OrientationFilter {
     /// the clean field itself (mag_reference_tau_s), so this needs only outlast a few readings' noise; 3 s took in
     /// the magnet of Fan's test B, which arrives 0.6 s after the start-up, and missed it (caught 0 %, now 91 %).
     double mag_reference_s = 0.5;
-    /// seel_ruppin judges each reading unfiltered (mag_lowpass_tau_s = 0 instead of the detector's 0.02 s): on
-    /// the eight BROAD trials the low-pass cost it 0.18 deg (2.20 -> 2.38 deg mean total RMSE; the fast-rotation
-    /// trial 1.65 -> 2.29, the moving-past-a-magnet trial 3.07 -> 3.89): its heading correction is better off
-    /// skipping the short dips of a field in fast motion, which the low-pass smooths away. The Kalman filters and
-    /// iecf gain from the low-pass on the same trials. Test B is still caught on 91 %.
-    Params() { mag_lowpass_tau_s = 0.0; }
     // The detector (MagDisturbanceDetector::Params) tolerates the magnetometer's lag while the sensor turns
-    // (mag_latency_s, fed with the bias-corrected rate), adopts a disturbance that keeps the same field for
-    // mag_max_rejection_s as the new reference, and after mag_accept_after_s of rejection uses the magnetometer
-    // again with tau_mag lengthened by 1 / mag_reduced_gain, so the heading never drifts without bound.
+    // (mag_latency_s, fed with the bias-corrected rate; each reading is also brought forward by it before use), and
+    // after mag_accept_after_s of rejection uses the magnetometer again with tau_mag lengthened by
+    // 1 / mag_reduced_gain, so the heading never drifts without bound.
   };
 
   /// Quantities derived once from Params.
