@@ -66,7 +66,7 @@ class SeelRuppinFilter final : public OrientationFilter {
     /// estimated vertical, s; the magnetometer is used unchecked meanwhile. One reading would carry its noise, and a
     /// start in motion its wrong vertical, into every later decision. Default 0.5 s: the detector goes on averaging
     /// the clean field itself (mag_reference_tau_s), so this needs only outlast a few readings' noise; 3 s took in
-    /// the magnet of Fan's test B, which arrives 0.6 s after the start-up, and missed it (caught 0 %, now 91 %).
+    /// the magnet of Fan's test B, which arrives 0.6 s after the start-up, and missed it (caught 0 %, now 88 %).
     double mag_reference_s = 0.5;
     // The detector (MagDisturbanceDetector::Params) tolerates the magnetometer's lag while the sensor turns
     // (mag_latency_s, fed with the bias-corrected rate; each reading is also brought forward by it before use), and
