@@ -69,6 +69,7 @@ double asin_clamped(double x) { return std::asin(std::clamp(x, -1.0, 1.0)); }
 void MagDisturbanceDetector::set_reference(double norm_uT, double dip_rad, double averaged_s) {
   set_reference_sine(norm_uT, std::isfinite(dip_rad) ? std::sin(dip_rad) : dip_rad);
   state_.ref_clean_s = std::clamp(averaged_s, 0.0, params_.mag_reference_tau_s);
+  state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_sin = 0.0;
 }
 
 void MagDisturbanceDetector::set_reference_sine(double norm_uT, double sin_dip) {
@@ -145,7 +146,11 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     state_.dip_tolerance = tolerance;
     state_.lowpass_started = true;
   } else {
-    const double k = dt_mag / (params_.mag_lowpass_tau_s + dt_mag);
+    if (dt_mag != state_.lowpass_dt) {  // a steady rate: the step is derived once
+      state_.lowpass_dt = dt_mag;
+      state_.lowpass_k = dt_mag / (params_.mag_lowpass_tau_s + dt_mag);
+    }
+    const double k = state_.lowpass_k;
     state_.lp_norm += k * (norm - state_.lp_norm);
     state_.lp_sin_dip += k * (sin_dip - state_.lp_sin_dip);
     state_.dip_tolerance = std::max(tolerance, (1.0 - k) * state_.dip_tolerance);
@@ -153,6 +158,7 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
   if (!state_.reference_known) {
     set_reference_sine(state_.lp_norm, state_.lp_sin_dip);
     state_.ref_clean_s = 0.0;
+    state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_sin = 0.0;
   }
   const double n = state_.lp_norm, down = state_.lp_sin_dip;
 
@@ -184,14 +190,21 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
   }
   track_disturbance(t_ns, dt_mag);
   if (!state_.disturbed && state_.inside_leave_band && dt_mag > 0.0) {
-    // The reference follows the clean field: a running mean, then exponential with mag_reference_tau_s.
-    state_.ref_clean_s = std::min(state_.ref_clean_s + dt_mag, params_.mag_reference_tau_s);
-    const double k = dt_mag / state_.ref_clean_s;
-    const double ref_norm = state_.ref_norm + k * (n - state_.ref_norm);
-    const double ref_sin = state_.ref_sin_dip + k * (down - state_.ref_sin_dip);
-    const double clean_s = state_.ref_clean_s;
-    set_reference_sine(ref_norm, ref_sin);
-    state_.ref_clean_s = clean_s;
+    // The reference follows the clean field: a running mean, then exponential with mag_reference_tau_s. The clean
+    // readings are summed and taken in every kReferenceStepS (the reference moves by a fraction dt / tau per
+    // reading; its bounds need not be derived anew for each).
+    constexpr double kReferenceStepS = 0.1;
+    state_.ref_pending_s += dt_mag;
+    state_.ref_pending_norm += dt_mag * n;
+    state_.ref_pending_sin += dt_mag * down;
+    if (state_.ref_pending_s >= kReferenceStepS) {
+      const double clean_s = std::min(state_.ref_clean_s + state_.ref_pending_s, params_.mag_reference_tau_s);
+      const double k = state_.ref_pending_s / clean_s, per_s = 1.0 / state_.ref_pending_s;
+      set_reference_sine(state_.ref_norm + k * (state_.ref_pending_norm * per_s - state_.ref_norm),
+                         state_.ref_sin_dip + k * (state_.ref_pending_sin * per_s - state_.ref_sin_dip));
+      state_.ref_clean_s = clean_s;
+      state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_sin = 0.0;
+    }
   }
   state_.last_ns = t_ns;
   return state_.disturbed;

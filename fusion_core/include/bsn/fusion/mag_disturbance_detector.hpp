@@ -128,10 +128,15 @@ class MagDisturbanceDetector {
 
   struct State {
     bool reference_known = false;
-    double ref_norm = 0.0;     ///< reference |m|, uT
-    double ref_sin_dip = 0.0;  ///< sine of the reference dip angle (positive: field points below horizontal)
-    double ref_cos_dip = 1.0;  ///< its cosine (>= 0)
-    double ref_clean_s = 0.0;  ///< clean time the reference has averaged over, s (capped at mag_reference_tau_s)
+    double ref_norm = 0.0;          ///< reference |m|, uT
+    double ref_sin_dip = 0.0;       ///< sine of the reference dip angle (positive: field points below horizontal)
+    double ref_cos_dip = 1.0;       ///< its cosine (>= 0)
+    double ref_clean_s = 0.0;       ///< clean time the reference has averaged over, s (capped at mag_reference_tau_s)
+    double ref_pending_s = 0.0;     ///< clean time not yet taken into the reference, s
+    double ref_pending_norm = 0.0;  ///< its integral of |m|_lp, uT s
+    double ref_pending_sin = 0.0;   ///< its integral of the dip's sine, s
+    double lowpass_dt = -1.0;       ///< the reading interval the low-pass step was derived for, s
+    double lowpass_k = 0.0;         ///< that step, dt / (mag_lowpass_tau_s + dt)
     bool lowpass_started = false;
     double lp_norm = 0.0;        ///< low-passed |m|, uT
     double lp_sin_dip = 0.0;     ///< low-passed sine of the dip, -(m . up) / |m|
