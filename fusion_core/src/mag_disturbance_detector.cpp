@@ -69,7 +69,7 @@ double asin_clamped(double x) { return std::asin(std::clamp(x, -1.0, 1.0)); }
 void MagDisturbanceDetector::set_reference(double norm_uT, double dip_rad, double averaged_s) {
   set_reference_sine(norm_uT, std::isfinite(dip_rad) ? std::sin(dip_rad) : dip_rad);
   state_.ref_clean_s = std::clamp(averaged_s, 0.0, params_.mag_reference_tau_s);
-  state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_sin = 0.0;
+  state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_down = 0.0;
 }
 
 void MagDisturbanceDetector::set_reference_sine(double norm_uT, double sin_dip) {
@@ -98,7 +98,7 @@ double MagDisturbanceDetector::last_norm_deviation() const {
 
 double MagDisturbanceDetector::last_dip_deviation() const {
   if (!state_.lowpass_started) return 0.0;
-  return std::abs(asin_clamped(state_.lp_sin_dip) - asin_clamped(state_.ref_sin_dip));
+  return std::abs(asin_clamped(state_.lp_down / state_.lp_norm) - asin_clamped(state_.ref_sin_dip));
 }
 
 void MagDisturbanceDetector::track_disturbance(std::uint64_t t_ns, double dt_s) {
@@ -109,7 +109,7 @@ void MagDisturbanceDetector::track_disturbance(std::uint64_t t_ns, double dt_s) 
   }
   // A field that stays the same (within the enter thresholds of the run's first reading) for mag_max_rejection_s
   // becomes the new reference; a field that keeps changing never does.
-  const double norm = state_.lp_norm, dip = asin_clamped(state_.lp_sin_dip);
+  const double norm = state_.lp_norm, dip = asin_clamped(state_.lp_down / state_.lp_norm);
   if (!state_.candidate || std::abs(norm - state_.candidate_norm) > params_.mag_norm_enter * state_.candidate_norm ||
       std::abs(dip - state_.candidate_dip) > params_.mag_dip_enter_rad + state_.dip_tolerance) {
     state_.candidate = true;
@@ -134,15 +134,15 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     state_.inside_leave_band = false;
     return true;
   }
-  const double sin_dip = std::clamp(-mag.dot(up) / norm, -1.0, 1.0);
+  const double down = -mag.dot(up);  // |m| sin(dip)
   const double dt_mag =
       state_.lowpass_started && t_ns > state_.last_ns ? static_cast<double>(t_ns - state_.last_ns) * 1e-9 : 0.0;
-  // First-order low-pass of |m| and sin(dip); the step dt / (tau + dt) needs no exponential and is exact to first
-  // order in dt / tau. The lag tolerance is held as long as the low-pass remembers the readings it widened.
+  // First-order low-pass of |m| and of |m| sin(dip); the step dt / (tau + dt) needs no exponential and is exact to
+  // first order in dt / tau. The lag tolerance is held as long as the low-pass remembers the readings it widened.
   const double tolerance = lag_dip_tolerance(rate_rad_s, dt_s + params_.mag_latency_s);
   if (!state_.lowpass_started || params_.mag_lowpass_tau_s == 0.0) {
     state_.lp_norm = norm;
-    state_.lp_sin_dip = sin_dip;
+    state_.lp_down = down;
     state_.dip_tolerance = tolerance;
     state_.lowpass_started = true;
   } else {
@@ -152,25 +152,25 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     }
     const double k = state_.lowpass_k;
     state_.lp_norm += k * (norm - state_.lp_norm);
-    state_.lp_sin_dip += k * (sin_dip - state_.lp_sin_dip);
+    state_.lp_down += k * (down - state_.lp_down);
     state_.dip_tolerance = std::max(tolerance, (1.0 - k) * state_.dip_tolerance);
   }
   if (!state_.reference_known) {
-    set_reference_sine(state_.lp_norm, state_.lp_sin_dip);
+    set_reference_sine(state_.lp_norm, state_.lp_down / state_.lp_norm);
     state_.ref_clean_s = 0.0;
-    state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_sin = 0.0;
+    state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_down = 0.0;
   }
-  const double n = state_.lp_norm, down = state_.lp_sin_dip;
+  const double n = state_.lp_norm, n_down = state_.lp_down;
 
-  // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as its sine against the sines of
-  // the band limits.
+  // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as its sine, |m| sin(dip) against
+  // the sines of the band limits times |m| (no division).
   const bool norm_outside_enter = n > bounds_.norm_enter_high || n < bounds_.norm_enter_low;
   const bool norm_inside_leave = n < bounds_.norm_leave_high && n > bounds_.norm_leave_low;
-  bool dip_outside_enter = down > bounds_.sin_enter_high || down < bounds_.sin_enter_low;
-  bool dip_inside_leave = down < bounds_.sin_leave_high && down > bounds_.sin_leave_low;
+  bool dip_outside_enter = n_down > bounds_.sin_enter_high * n || n_down < bounds_.sin_enter_low * n;
+  bool dip_inside_leave = n_down < bounds_.sin_leave_high * n && n_down > bounds_.sin_leave_low * n;
   if (state_.dip_tolerance > 0.0 && !dip_inside_leave) {
     // Turning: the bands widened by the lag tolerance, on the angle itself.
-    const double dev = std::abs(asin_clamped(down) - asin_clamped(state_.ref_sin_dip));
+    const double dev = std::abs(asin_clamped(n_down / n) - asin_clamped(state_.ref_sin_dip));
     dip_outside_enter = dev > params_.mag_dip_enter_rad + state_.dip_tolerance;
     dip_inside_leave = dev < params_.mag_dip_leave_rad + state_.dip_tolerance;
   }
@@ -196,14 +196,15 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     constexpr double kReferenceStepS = 0.1;
     state_.ref_pending_s += dt_mag;
     state_.ref_pending_norm += dt_mag * n;
-    state_.ref_pending_sin += dt_mag * down;
+    state_.ref_pending_down += dt_mag * n_down;
     if (state_.ref_pending_s >= kReferenceStepS) {
       const double clean_s = std::min(state_.ref_clean_s + state_.ref_pending_s, params_.mag_reference_tau_s);
-      const double k = state_.ref_pending_s / clean_s, per_s = 1.0 / state_.ref_pending_s;
-      set_reference_sine(state_.ref_norm + k * (state_.ref_pending_norm * per_s - state_.ref_norm),
-                         state_.ref_sin_dip + k * (state_.ref_pending_sin * per_s - state_.ref_sin_dip));
+      const double k = state_.ref_pending_s / clean_s;
+      set_reference_sine(
+          state_.ref_norm + k * (state_.ref_pending_norm / state_.ref_pending_s - state_.ref_norm),
+          state_.ref_sin_dip + k * (state_.ref_pending_down / state_.ref_pending_norm - state_.ref_sin_dip));
       state_.ref_clean_s = clean_s;
-      state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_sin = 0.0;
+      state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_down = 0.0;
     }
   }
   state_.last_ns = t_ns;

@@ -23,9 +23,9 @@
 //   - no heading collapse: after mag_accept_after_s of rejection (a budget that refills at twice the speed while the
 //     field is clean), the magnetometer is used again with its gain reduced to mag_reduced_gain, so heading error
 //     stays bounded by the disturbance instead of growing with gyro drift for ever.
-// Per reading in a clean field it takes two square roots and no trigonometry: the dip is low-passed and judged as its
-// sine (asin is monotonic), against bounds derived from the reference's sine and cosine; only a reading outside the
-// inner band while the sensor turns, or a disturbed one, takes an asin.
+// Per reading in a clean field it takes one square root, no division and no trigonometry: |m| sin(dip) is low-passed
+// and judged against the sines of the band limits (asin is monotonic) times |m|, bounds derived from the reference's
+// sine and cosine; only a reading outside the inner band while the sensor turns, or a disturbed one, takes an asin.
 #pragma once
 
 #include <algorithm>
@@ -134,12 +134,12 @@ class MagDisturbanceDetector {
     double ref_clean_s = 0.0;       ///< clean time the reference has averaged over, s (capped at mag_reference_tau_s)
     double ref_pending_s = 0.0;     ///< clean time not yet taken into the reference, s
     double ref_pending_norm = 0.0;  ///< its integral of |m|_lp, uT s
-    double ref_pending_sin = 0.0;   ///< its integral of the dip's sine, s
+    double ref_pending_down = 0.0;  ///< its integral of |m|_lp sin(dip), uT s
     double lowpass_dt = -1.0;       ///< the reading interval the low-pass step was derived for, s
     double lowpass_k = 0.0;         ///< that step, dt / (mag_lowpass_tau_s + dt)
     bool lowpass_started = false;
     double lp_norm = 0.0;        ///< low-passed |m|, uT
-    double lp_sin_dip = 0.0;     ///< low-passed sine of the dip, -(m . up) / |m|
+    double lp_down = 0.0;        ///< low-passed |m| sin(dip) = -(m . up), uT
     double dip_tolerance = 0.0;  ///< rad: the lag tolerance, held over the low-pass's memory
     bool disturbed = false;
     bool inside_leave_band = false;     ///< the last sample was inside the inner band
