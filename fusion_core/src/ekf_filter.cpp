@@ -154,7 +154,14 @@ void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen
   state_.q = n > 1e-9 ? Quat(q(0) * inv_n, q(1) * inv_n, q(2) * inv_n, q(3) * inv_n) : state_.q;
 }
 
-UpdateResult EkfFilter::step(const ImuSample& s, double dt) {
+UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
+  // The magnetometer reading brought forward by its own delay behind the gyro (lag_compensated, mag_latency_s), so
+  // that a fast turn does not pull the heading towards where the sensor pointed that long ago.
+  ImuSample s_fwd = s_in;
+  if (s_in.has_mag && s_in.has_gyr && params_.mag_latency_s > 0.0) {
+    s_fwd.mag = lag_compensated(s_in.mag, s_in.gyr - state_.bias, params_.mag_latency_s);
+  }
+  const ImuSample& s = s_fwd;
   state_.flags.reinitialised = false;
 
   // Prediction: q <- q (x) exp(w dt), b random walk; F and Q linearised at the new estimate. w is the mean of the

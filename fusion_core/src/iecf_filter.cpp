@@ -80,6 +80,11 @@ UpdateResult IecfFilter::start(const ImuSample& s) {
 }
 
 UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
+  // The magnetometer reading brought forward by its own delay behind the gyro (lag_compensated, mag_latency_s), so
+  // that a fast turn does not pull the heading towards where the sensor pointed that long ago.
+  const Vec3 mag = s.has_mag && s.has_gyr && params_.mag_latency_s > 0.0
+                       ? lag_compensated(s.mag, s.gyr - bias_.bias(), params_.mag_latency_s)
+                       : s.mag;
   const std::uint64_t dt_ns = s.timestamp_ns - clock().last_ns;
   const std::uint64_t since_init_ns = s.timestamp_ns - clock().init_ns;
   const double gain =
@@ -102,19 +107,19 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
     error += a.cross(up_est);  // e_a: measured x predicted up
     // heading_from_mag_possible(s), with the norms computed once: |m| > 1e-9 and |m x a| > 1e-3 |m| |a|, squared, a
     // unit.
-    const double mag_squared_norm = use_magnetometer_ && s.has_mag ? s.mag.squaredNorm() : 0.0;
-    const Vec3 m_cross_a = s.mag.cross(a);
+    const double mag_squared_norm = use_magnetometer_ && s.has_mag ? mag.squaredNorm() : 0.0;
+    const Vec3 m_cross_a = mag.cross(a);
     const double m_cross_a_squared_norm = m_cross_a.squaredNorm();
     if (mag_squared_norm > 1e-18 && m_cross_a_squared_norm > 1e-6 * mag_squared_norm) {
       double mag_weight = 1.0;
       if (params_.mag_rejection != 0.0) {
-        mag_detector_.update(s.timestamp_ns, s.mag, up_est, rate.cross(up_est).norm(), dt);  // horizontal rate
+        mag_detector_.update(s.timestamp_ns, mag, up_est, rate.cross(up_est).norm(), dt);  // horizontal rate
         mag_weight = mag_detector_.gain_factor();  // < 1 for a field used after a long rejection
       }
       if (params_.mag_rejection != 0.0 && !mag_detector_.usable()) {
         mag_rejected = true;
       } else if (!state_.heading_known) {
-        q = orientation_from_acc_mag(s.acc, s.mag);  // first heading after a start without magnetometer
+        q = orientation_from_acc_mag(s.acc, mag);  // first heading after a start without magnetometer
         mag_used = true;
       } else {
         const Vec3 east_measured = m_cross_a * (1.0 / std::sqrt(m_cross_a_squared_norm));  // north x up = east

@@ -74,10 +74,11 @@ const char* grade_name(Grade g) {
 
 std::vector<StandardTestResult> run_standard_tests(
     const std::string& scenario_dir, const std::vector<std::pair<std::string, fusion::FilterSpec>>& filters,
-    double startup_s) {
+    double startup_s, std::optional<std::uint64_t> seed) {
   std::vector<StandardTestResult> results;
   for (const StandardTest& test : fan_standard_tests()) {
-    const sim::ScenarioSpec spec = sim::load_scenario(scenario_dir + "/" + test.scenario + ".yaml");
+    sim::ScenarioSpec spec = sim::load_scenario(scenario_dir + "/" + test.scenario + ".yaml");
+    if (seed) spec.seed = *seed;
     // Simulated once, then every filter runs over the same samples.
     sim::ScenarioRunner runner(spec, {}, false);
     std::vector<sim::ScenarioSample> samples, one;

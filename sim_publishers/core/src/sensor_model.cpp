@@ -74,7 +74,7 @@ std::optional<SensorErrors> sensor_preset(std::string_view name) {
     e.acc.nonorthogonality = Vec3(-0.003, 0.004, 0.002);
     e.acc.range = 16.0 * fusion::kGravity;
     e.acc.lsb = e.acc.range / 32768.0;
-    e.mag.white_density = 0.06;  // 0.6 uT RMS at 100 Hz
+    e.mag.white_density = 0.06;  // 0.42 uT RMS per reading at its 50 Hz
     e.mag.hard_iron = Vec3(12.0, -8.0, 20.0);
     e.mag.soft_iron << 1.02, 0.01, 0.0, 0.01, 0.98, 0.005, 0.0, 0.005, 1.01;
     e.mag.range = 4900.0;
@@ -158,6 +158,12 @@ SensorSimulator::SensorSimulator(const SensorErrors& errors, double rate_hz, std
   init(errors_.gyr, gyr_);
   init(errors_.acc, acc_);
   init(errors_.mag, mag_);
+  // A slower magnetometer's white noise is drawn per IMU sample but only every (rate / mag_rate)-th draw is read:
+  // its per-reading SD is the density over the magnetometer's own bandwidth, density * sqrt(mag_rate), so that the
+  // Allan deviation of its readings at their own rate gives back the configured density.
+  if (errors.mag_rate_hz > 0.0 && errors.mag_rate_hz < rate_hz) {
+    mag_.white_sd = errors.mag.white_density * std::sqrt(errors.mag_rate_hz);
+  }
   // The Gauss-Markov bias starts in its stationary distribution, not at zero.
   if (errors_.gyr.bias_instability > 0.0) gyr_.markov = normal3() * errors_.gyr.bias_instability;
   if (errors_.acc.bias_instability > 0.0) acc_.markov = normal3() * errors_.acc.bias_instability;

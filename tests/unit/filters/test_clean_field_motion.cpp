@@ -139,23 +139,28 @@ bool is_one_of(const FilterInfo& info, std::initializer_list<const char*> names)
   return false;
 }
 
-// Filters that still miss a bound of this file (issue 12 left open for them; the figures are in its report): the
-// check is reported as skipped with the measured figure, never as passed, and passes as soon as the bound holds.
+// Filters that still miss a bound of this file (issue 12 left open for them): the check is reported as skipped with
+// the measured figure, never as passed, and passes as soon as the bound holds. Translation: the magnetometer is
+// accepted throughout (as it should be: the field is clean); what leaks into the heading is the tilt error that 1 g
+// of external acceleration leaves in these filters (ekf, mekf: 2.3 deg RMS; complementary, no bias estimate: 6.2;
+// mekf_adaptive, whose stiff slow set is chosen between the moves: 8.1). Long rejection: mekf_adaptive 12.7 deg
+// against the bound of 12.6 (mekf passes since its accelerometer update leaves heading and bias alone while the
+// magnetometer is out).
 bool known_to_miss(const FilterInfo& info, const char* test) {
   if (std::string(test) == "translation") return is_one_of(info, {"complementary", "ekf", "mekf", "mekf_adaptive"});
-  if (std::string(test) == "long rejection") return is_one_of(info, {"mekf", "mekf_adaptive"});
+  if (std::string(test) == "long rejection") return is_one_of(info, {"mekf_adaptive"});
   return false;
 }
 
 // The filters whose rejection can be forced on by its thresholds, with those parameters (a band of 1e-6 that any
 // noise leaves; no new reference, no reduced-gain acceptance).
 std::vector<std::pair<std::string, double>> always_rejecting(const FilterInfo& info) {
-  if (is_one_of(info, {"seel_ruppin", "iecf"})) {
-    return {
-        {"mag_norm_enter", 1e-6}, {"mag_norm_leave", 1e-6}, {"mag_max_rejection_s", 1e6}, {"mag_accept_after_s", 1e6}};
-  }
-  if (is_one_of(info, {"ekf", "mekf", "mekf_adaptive", "dlkf"})) {
-    return {{"mag_magnitude_enter", 1e-6}, {"mag_magnitude_exit", 1e-6}, {"mag_accept_after_s", 1e6}};
+  if (is_one_of(info, {"seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"})) {
+    return {{"mag_norm_enter", 1e-6},
+            {"mag_norm_leave", 1e-6},
+            {"mag_reference_tau_s", 1e6},
+            {"mag_max_rejection_s", 1e6},
+            {"mag_accept_after_s", 1e6}};
   }
   return {};
 }

@@ -85,6 +85,24 @@ TEST(MagDisturbanceDetector, DipAngleOfTheEarthField) {
   EXPECT_NEAR(MagDisturbanceDetector::dip_angle(kField, Vec3::UnitZ()), 64 * kDeg, 1e-12);
 }
 
+// The threshold logic on its own: each reading judged unfiltered, the reference fixed (no low-pass, no averaging),
+// enter 10 % / 8 deg, leave 5 % / 4 deg, 1 s clean.
+MagDisturbanceDetector::Params unfiltered() {
+  MagDisturbanceDetector::Params p;
+  p.mag_norm_enter = 0.10;
+  p.mag_norm_leave = 0.05;
+  p.mag_dip_enter_rad = 0.14;
+  p.mag_dip_leave_rad = 0.07;
+  p.mag_min_clean_s = 1.0;
+  p.mag_lowpass_tau_s = 0.0;
+  p.mag_reference_tau_s = 1e12;
+  return p;
+}
+// A reference that the clean field does not move (as averaged over 1e12 s).
+void fix_reference(MagDisturbanceDetector& d, const Vec3& field) {
+  d.set_reference(field.norm(), MagDisturbanceDetector::dip_angle(field, Vec3::UnitZ()), 1e12);
+}
+
 // A field near a single threshold with noise: one threshold chatters, two thresholds with a minimum clean time
 // do not. (The new-field rule is switched off: a field hovering at 8 % for 20 s would rightly be adopted.)
 TEST(MagDisturbanceDetector, TwoThresholdsDoNotChatterWhereOneDoes) {
@@ -92,6 +110,7 @@ TEST(MagDisturbanceDetector, TwoThresholdsDoNotChatterWhereOneDoes) {
     MagDisturbanceDetector d(p);
     std::mt19937 rng(9);
     std::normal_distribution<double> noise(0.0, 0.02);
+    fix_reference(d, kField);
     d.update(0, kField, Vec3::UnitZ());
     int changes = 0;
     bool last = false;
@@ -103,18 +122,19 @@ TEST(MagDisturbanceDetector, TwoThresholdsDoNotChatterWhereOneDoes) {
     }
     return changes;
   };
-  MagDisturbanceDetector::Params single;
+  MagDisturbanceDetector::Params single = unfiltered();
   single.mag_norm_enter = single.mag_norm_leave = 0.08;
   single.mag_min_clean_s = 1e-9;
   single.mag_max_rejection_s = 1e6;
   EXPECT_GT(transitions(single), 100);
-  MagDisturbanceDetector::Params two;
+  MagDisturbanceDetector::Params two = unfiltered();
   two.mag_max_rejection_s = 1e6;
   EXPECT_EQ(transitions(two), 1);  // enters once (a sample beyond 10 %), stays
 }
 
 TEST(MagDisturbanceDetector, CleanAgainOnlyAfterTheMinimumDurationInsideTheInnerBand) {
-  MagDisturbanceDetector d;  // enter 10 %, leave 5 %, min_clean 1 s
+  MagDisturbanceDetector d(unfiltered());  // enter 10 %, leave 5 %, min_clean 1 s
+  fix_reference(d, kField);
   EXPECT_FALSE(d.update(0, kField, Vec3::UnitZ()));
   EXPECT_TRUE(d.update(seconds_to_ns(0.01), kField * 1.2, Vec3::UnitZ()));   // magnitude: at once
   EXPECT_TRUE(d.update(seconds_to_ns(0.02), kField * 1.07, Vec3::UnitZ()));  // between the bands: still disturbed
@@ -127,11 +147,14 @@ TEST(MagDisturbanceDetector, CleanAgainOnlyAfterTheMinimumDurationInsideTheInner
   const Vec3 steeper = Eigen::AngleAxisd(12 * kDeg, Vec3::UnitX()) * kField;
   EXPECT_NEAR(steeper.norm(), kField.norm(), 1e-9);
   EXPECT_TRUE(d.update(seconds_to_ns(2.04), steeper, Vec3::UnitZ()));
-  EXPECT_THROW(MagDisturbanceDetector({0.05, 0.10, 0.14, 0.07, 1.0}), std::invalid_argument);
+  MagDisturbanceDetector::Params crossed = unfiltered();
+  crossed.mag_norm_leave = 0.2;  // above enter
+  EXPECT_THROW(MagDisturbanceDetector{crossed}, std::invalid_argument);
 }
 
-// The dip bands are tested on sines against precomputed bounds (no asin per sample): the decisions must be those
-// of the angles, on both sides of each threshold, also where a band limit lies beyond the vertical.
+// The dip bands are tested on sines against bounds derived from the reference's sine and cosine (no asin per
+// sample): the decisions must be those of the angles, on both sides of each threshold, also where a band limit
+// lies beyond the vertical.
 TEST(MagDisturbanceDetector, DipDecisionsAreThoseOfTheAngles) {
   for (double ref_dip_deg : {64.0, -30.0, 85.0}) {
     const Vec3 reference = Eigen::AngleAxisd((64.0 - ref_dip_deg) * kDeg, Vec3::UnitX()) * kField;
@@ -139,7 +162,8 @@ TEST(MagDisturbanceDetector, DipDecisionsAreThoseOfTheAngles) {
     for (double change_deg = -20.0; change_deg <= 20.0; change_deg += 0.25) {
       const double new_dip_deg = ref_dip_deg + change_deg;
       if (std::abs(new_dip_deg) > 90.0) continue;  // not a dip
-      MagDisturbanceDetector d;                    // enter 0.14 rad, leave 0.07 rad
+      MagDisturbanceDetector d(unfiltered());      // enter 0.14 rad, leave 0.07 rad
+      fix_reference(d, reference);
       d.update(0, reference, Vec3::UnitZ());
       const Vec3 turned = Eigen::AngleAxisd(-change_deg * kDeg, Vec3::UnitX()) * reference;
       const bool disturbed = d.update(seconds_to_ns(0.01), turned, Vec3::UnitZ());
@@ -149,6 +173,45 @@ TEST(MagDisturbanceDetector, DipDecisionsAreThoseOfTheAngles) {
       EXPECT_NEAR(d.last_norm_deviation(), 0.0, 1e-12);
     }
   }
+}
+
+// The low-pass is what makes the decision robust (VQF): readings whose noise alone crosses the enter threshold now
+// and then (SD 1/3 of the 10 % threshold, about one reading in 400 beyond it) are judged disturbed unfiltered,
+// but not low-passed; a real step beyond the threshold is still flagged within a few time constants.
+TEST(MagDisturbanceDetector, LowPassIgnoresNoiseButNotAStep) {
+  auto disturbed_fraction = [](double tau_s) {
+    MagDisturbanceDetector::Params p = unfiltered();
+    p.mag_lowpass_tau_s = tau_s;
+    p.mag_min_clean_s = 0.02;
+    MagDisturbanceDetector d(p);
+    fix_reference(d, kField);
+    std::mt19937 rng(4);
+    std::normal_distribution<double> noise(0.0, 0.033);
+    int disturbed = 0;
+    for (int i = 0; i < 20000; ++i)
+      disturbed += d.update(seconds_to_ns(i * 0.02), kField * (1.0 + noise(rng)), Vec3::UnitZ());
+    return disturbed / 20000.0;
+  };
+  EXPECT_GT(disturbed_fraction(0.0), 0.002);    // 3 SD: 0.27 % of the readings, each held a reading longer
+  EXPECT_LT(disturbed_fraction(0.02), 0.0005);  // SD 1/sqrt(3) as large: 5 SD
+  MagDisturbanceDetector d;                     // defaults: low-pass 0.02 s
+  d.update(0, kField, Vec3::UnitZ());
+  std::uint64_t flagged_ns = 0;
+  for (int i = 1; i < 50 && flagged_ns == 0; ++i) {
+    if (d.update(seconds_to_ns(i * 0.02), kField * 1.2, Vec3::UnitZ())) flagged_ns = seconds_to_ns(i * 0.02);
+  }
+  // A 20 % step crosses 10 % when 1 - (1 - k)^n > 1/2, k = dt / (tau + dt) = 1/2 at 50 Hz: the second reading.
+  EXPECT_EQ(flagged_ns, seconds_to_ns(0.04));
+}
+
+// The reference starts as the first reading and then averages the clean field: a first reading off by 4 % (noise,
+// a start in motion) is forgotten, so a later 7 % change of the magnitude is judged against the true field.
+TEST(MagDisturbanceDetector, ReferenceAveragesTheCleanField) {
+  MagDisturbanceDetector d;
+  d.update(0, kField * 1.04, Vec3::UnitZ());
+  for (int i = 1; i <= 500; ++i) ASSERT_FALSE(d.update(seconds_to_ns(i * 0.02), kField, Vec3::UnitZ())) << i;
+  EXPECT_NEAR(d.state().ref_norm, kField.norm(), 0.001 * kField.norm());  // a running mean over 10 s
+  EXPECT_NEAR(d.last_norm_deviation(), 0.0, 1e-3);
 }
 
 // ---------------------------------------------------------------------------------------------------------------

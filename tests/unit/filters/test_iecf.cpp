@@ -59,7 +59,10 @@ TEST(Iecf, MagnetNearStaticSensorLeavesRollAndPitchAndRejectionKeepsYaw) {
   const auto [tilt_on, yaw_on] = magnet_test(protected_filter);
   EXPECT_LT(tilt_on, 0.1 * kDeg);
   EXPECT_LT(yaw_on, 0.25 * yaw_off);
-  EXPECT_LT(yaw_on, 2 * kDeg);
+  // The falling edge is used again once inside the leave band (7 %, 4 deg) for mag_min_clean_s (0.5 s): a residual
+  // field at those limits turns the heading reference by up to 9 deg, seen at gain 0.5 rad/s for the few tenths of
+  // a second the edge lasts: a few degrees, against 150 deg unprotected.
+  EXPECT_LT(yaw_on, 3 * kDeg) << yaw_off / kDeg;
 }
 
 // After start-up, a field heading change of 10 deg decays as d(alpha)/dt = -K sin(alpha): to 10 deg / e within

@@ -260,13 +260,15 @@ TEST(SeelRuppin, FlagsMagneticDisturbanceWhenRejectionIsOn) {
   EXPECT_FALSE(f.flags().mag_rejected);
 }
 
-// A disturbance that keeps the same field for mag_max_rejection_s becomes the new reference (a wrong reference
-// must not shut the magnetometer out for good), while one that keeps changing, like a magnet moving with the
+// With the new-field rule on (mag_max_rejection_s > 0; off by default), a disturbance that keeps the same field for
+// mag_max_rejection_s becomes the new reference, while one that keeps changing, like a magnet moving with the
 // sensor, stays rejected.
 TEST(SeelRuppin, SteadyNewFieldIsAdoptedChangingOneIsNot) {
   const double ts = 0.01;
+  SeelRuppinFilter::Params p;
+  p.mag_max_rejection_s = 20.0;  // VQF's magNewTime
   auto run = [&](bool steady) {
-    SeelRuppinFilter f;
+    SeelRuppinFilter f(p);
     const Quat q = Quat::Identity();
     const double learned = f.params().init_period_s + f.params().mag_reference_s + 0.1;
     double t = 0.0;
@@ -284,7 +286,7 @@ TEST(SeelRuppin, SteadyNewFieldIsAdoptedChangingOneIsNot) {
   const auto [steady_rejected_for, steady_rejected_at_end] = run(true);
   EXPECT_FALSE(steady_rejected_at_end);
   // Adopted (and so clean) after mag_max_rejection_s.
-  EXPECT_NEAR(steady_rejected_for, SeelRuppinFilter::Params{}.mag_max_rejection_s, 0.1);
+  EXPECT_NEAR(steady_rejected_for, p.mag_max_rejection_s, 0.1);
   const auto [changing_rejected_for, changing_rejected_at_end] = run(false);
   EXPECT_TRUE(changing_rejected_at_end);
   (void)changing_rejected_for;
@@ -293,7 +295,9 @@ TEST(SeelRuppin, SteadyNewFieldIsAdoptedChangingOneIsNot) {
 // A rotating sensor with consistent measurements: strapdown integration must keep the estimate on the truth,
 // and the acceleration low-pass (default on) must not delay a true rotation.
 TEST(SeelRuppin, TracksAConstantRateRotation) {
-  SeelRuppinFilter f;
+  SeelRuppinFilter::Params exact;
+  exact.mag_latency_s = 0.0;  // exact samples: the magnetometer is in step with the gyro, nothing to bring forward
+  SeelRuppinFilter f(exact);
   const Vec3 omega = Vec3(0.3, -0.5, 1.2);  // rad/s, sensor frame
   Quat q_true = from_yaw_pitch_roll({10 * kDeg, 20 * kDeg, 30 * kDeg});
   const double ts = 0.01;

@@ -3,9 +3,10 @@
 // magnetometer are fused in ONE measurement update against gravity and a predefined earth field. Because of that
 // joint update a magnetic disturbance also tilts the estimate (Fan §2.4.2, test B): this is the reference the
 // decoupled filters (MEKF, DLKF) are compared with. The earth field reference is taken at initialisation from the
-// first accelerometer + magnetometer sample. Magnetometer rejection (MagneticRAdaption): dip thresholds widened by
-// the horizontal rate times the magnetometer's lag, a reading used again at four times its variance after 60 s of
-// rejection, and while it is rejected an accelerometer-only update keeps its tilt part only (no turn about the
+// first accelerometer + magnetometer sample. Magnetometer rejection (MagneticRAdaption, the shared
+// MagDisturbanceDetector): low-passed magnitude and dip, dip thresholds widened by the horizontal rate times the
+// magnetometer's lag, a steady new field adopted after 20 s, a reading used again at four times its variance after
+// 60 s of rejection, and while it is rejected an accelerometer-only update keeps its tilt part only (no turn about the
 // vertical, no bias change along it), so the heading degrades like the gyro's own drift, never faster.
 #pragma once
 

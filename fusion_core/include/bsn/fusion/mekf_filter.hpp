@@ -14,9 +14,11 @@
 // Nez work in NED with a JPL-style error; here everything is in the project's convention (ENU, Hamilton,
 // sensor-to-earth q) and the error state is the sensor-frame rotation vector: q_true = q_est * exp(dtheta).
 // With that choice the error dynamics, Phi, Q_d and H are the paper's, and r3 is the earth vertical expressed in
-// the sensor frame. Magnetometer rejection (MagneticRAdaption) as in the EKF: lag-tolerant dip test, the reading used
-// again at four times its variance after 60 s of rejection, and while it is rejected the accelerometer update keeps
-// its tilt part only (no turn about the vertical, no bias change along it).
+// the sensor frame. Magnetometer rejection (MagneticRAdaption, the shared MagDisturbanceDetector) as in the EKF:
+// low-passed magnitude and dip, lag-tolerant dip test, a steady new field adopted after 20 s, the reading used again
+// at four times its variance after 60 s of rejection; while it is rejected the accelerometer update drops P's
+// correlations of the heading and of the bias with the tilt, so it turns neither the heading nor the bias, and P
+// stays consistent with what it did.
 #pragma once
 
 #include <Eigen/Core>

@@ -2,6 +2,8 @@
 // through every test, graded as in their Table 5: good <= 2 deg, acceptable 2-5 deg, poor > 5 deg.
 #pragma once
 
+#include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -42,11 +44,12 @@ struct StandardTestResult {
 };
 
 /// Runs every filter in `filters` (label, spec) through every test, with the scenarios read from
-/// `scenario_dir`/<scenario>.yaml. Samples before `startup_s` (the filters' start-up) are not scored. Throws
+/// `scenario_dir`/<scenario>.yaml. Samples before `startup_s` (the filters' start-up) are not scored. `seed`, when
+/// given, replaces the scenarios' own seed (another noise realisation of the same tests). Throws
 /// sim::ScenarioError or std::invalid_argument for a missing or bad scenario.
 std::vector<StandardTestResult> run_standard_tests(
     const std::string& scenario_dir, const std::vector<std::pair<std::string, fusion::FilterSpec>>& filters,
-    double startup_s = 3.0);
+    double startup_s = 3.0, std::optional<std::uint64_t> seed = std::nullopt);
 
 /// Fan's Table 5: one row per filter, one column per test, "error grade" in each cell.
 std::string standard_tests_table(const std::vector<StandardTestResult>& results);

@@ -29,12 +29,12 @@ struct BiasStep {
 
 /// Errors of one three-axis channel, in the channel's unit (rad/s, m/s^2 or uT).
 struct ChannelErrors {
-  double white_density = 0.0;            ///< white noise density, unit/sqrt(Hz) (per-sample SD = density*sqrt(rate))
-  Vec3 bias = Vec3::Zero();              ///< constant bias b, unit
-  double bias_random_walk = 0.0;         ///< bias random walk density, unit/sqrt(s): the bias moves by this*sqrt(dt)
-  double bias_instability = 0.0;         ///< SD of the first-order Gauss-Markov bias, unit
-  double bias_correlation_s = 100.0;     ///< correlation time of that bias, s
-  Vec3 scale = Vec3::Ones();             ///< S diagonal: physical units per reading unit
+  double white_density = 0.0;         ///< white noise density, unit/sqrt(Hz) (per-reading SD = density*sqrt(own rate))
+  Vec3 bias = Vec3::Zero();           ///< constant bias b, unit
+  double bias_random_walk = 0.0;      ///< bias random walk density, unit/sqrt(s): the bias moves by this*sqrt(dt)
+  double bias_instability = 0.0;      ///< SD of the first-order Gauss-Markov bias, unit
+  double bias_correlation_s = 100.0;  ///< correlation time of that bias, s
+  Vec3 scale = Vec3::Ones();          ///< S diagonal: physical units per reading unit
   Vec3 nonorthogonality = Vec3::Zero();  ///< alpha, beta, gamma of T (lower triangular, unit diagonal)
   Vec3 mounting_rad = Vec3::Zero();      ///< phi, theta, psi of R = Rz(psi) Ry(theta) Rx(phi)
   Mat3 soft_iron = Mat3::Identity();     ///< A_si (magnetometer)
