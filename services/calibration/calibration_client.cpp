@@ -140,6 +140,8 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
   }
   const std::uint64_t lost_before = progress_reader->writers_lost();
   request_writer->write(request);
+  auto last_sent_at = Clock::now();
+  constexpr double kResendAfterS = 0.5;
   std::fprintf(stderr, "request %s: %s of %s\n", request.request_id().c_str(), calib::kind_name(*kind),
                request.node_id().c_str());
 
@@ -188,6 +190,13 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
         return ok ? 0 : 1;
       }
       continue;
+    }
+    // No answer yet: the service may have answered before its progress writer had matched our reader (discovery
+    // runs each way on its own); it says a refusal again to the same request id (an accepted one is ignored, and its
+    // progress comes every period anyway).
+    if (!progress && since(last_sent_at) >= kResendAfterS) {
+      request_writer->write(request);
+      last_sent_at = Clock::now();
     }
     // Service death: its progress writer's liveliness (1 s lease) lapses, or it leaves (unmatched).
     if (progress_reader->writers_lost() > lost_before || progress_reader->matched() == 0 ||

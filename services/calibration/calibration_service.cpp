@@ -167,6 +167,11 @@ void CalibrationService::publish_stored() {
 
 void CalibrationService::refuse(const std::string& request_id, const std::string& why) {
   logging::log_warn("request '", request_id, "' refused: ", why);
+  if (!request_id.empty() && refusals_.size() < kMaxRefusalsKept) refusals_[request_id] = why;
+  publish_refusal(request_id, why);
+}
+
+void CalibrationService::publish_refusal(const std::string& request_id, const std::string& why) {
   bsn::CalibrationProgress p;
   p.request_id(request_id);
   p.phase(bsn::CALIBRATION_PHASE_REFUSED);
@@ -194,6 +199,13 @@ void CalibrationService::on_request(const bsn::CalibrationRequest& request) {
     return;
   }
   if (!answered_.insert(id).second) {
+    // A refusal is said again: its requester sends again when no answer came, since the refusal can go out before
+    // this writer has matched the requester's progress reader (discovery runs each way on its own).
+    if (const auto refused = refusals_.find(id); refused != refusals_.end()) {
+      logging::log_info("request '", id, "' arrived again; its refusal is sent again");
+      publish_refusal(id, refused->second);
+      return;
+    }
     logging::log_info("request '", id, "' arrived again; it is answered once, this copy is ignored");
     return;
   }

@@ -57,6 +57,7 @@ class CalibrationService {
   void on_request(const bsn::CalibrationRequest& request);
   void on_raw(const bsn::RawSample& raw);
   void refuse(const std::string& request_id, const std::string& why);
+  void publish_refusal(const std::string& request_id, const std::string& why);
   /// Ends `run` now: fits each node (or fails it with `abort_reason`), stores, publishes; erases it.
   void finish(const std::string& request_id, std::uint64_t now_ns, const std::string& abort_reason = "");
   void publish_progress(Run& run, std::uint64_t now_ns);
@@ -67,10 +68,12 @@ class CalibrationService {
   Options options_;
   CalibrationStore store_;
   mutable std::mutex mutex_;
-  std::map<std::string, Run> runs_;                       ///< by request id
-  std::unordered_map<std::string, std::string> busy_;     ///< node -> the request collecting it
-  std::set<std::string> answered_;                        ///< every request id ever accepted or refused
-  std::unordered_map<std::string, std::uint64_t> heard_;  ///< node -> last arrival on bsn/raw
+  std::map<std::string, Run> runs_;                    ///< by request id
+  std::unordered_map<std::string, std::string> busy_;  ///< node -> the request collecting it
+  std::set<std::string> answered_;                     ///< every request id ever accepted or refused
+  std::map<std::string, std::string> refusals_;        ///< refused request id -> why (said again on a repeat)
+  static constexpr std::size_t kMaxRefusalsKept = 10000;
+  std::unordered_map<std::string, std::uint64_t> heard_;                        ///< node -> last arrival on bsn/raw
   std::map<std::pair<std::string, int>, bsn::CalibrationResult> last_success_;  ///< (node, kind) -> stored result
   std::unique_ptr<dds::Writer<bsn::CalibrationResult>> result_writer_;
   std::unique_ptr<dds::Writer<bsn::CalibrationProgress>> progress_writer_;

@@ -354,6 +354,15 @@ TEST_F(Calibration, RefusalsASilentNodeAndDuplicateIdsAreAnsweredWithReasons) {
   expect_refused("nothing", "neither duration_s nor sample_count");
   expect_refused("nan", "duration_s");
   expect_refused("everyone", "node '*': no node has published on bsn/raw");
+  // A refused id sent again is refused again (a requester whose progress reader matched late asks twice).
+  peer.send("negative", "other", -1.0);
+  EXPECT_TRUE(wait_until(
+      [&] {
+        std::size_t refusals = 0;
+        for (const auto& p : peer.progress_of("negative")) refusals += p.phase() == bsn::CALIBRATION_PHASE_REFUSED;
+        return refusals >= 2;
+      },
+      std::chrono::seconds(3)));
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   EXPECT_EQ(peer.results_of("silent").size(), 1u);
   std::size_t waiting = 0;
