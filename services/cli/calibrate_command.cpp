@@ -404,8 +404,17 @@ Command calibrate_command() {
             cmd->add_option("--plot", opt->plot, "with --allan: write the Allan curves as SVG");
             LiveCalibrationOptions& live = opt->live_options;
             cmd->add_flag("--live", opt->live, "calibrate live through `bsn calibration` (see --node, --kind)");
-            cmd->add_option("--kind", live.kind, "with --live: magnetometer, gyro-bias or accelerometer")
+            cmd->add_option("--kind", live.kind,
+                            "with --live: magnetometer, gyro-bias, accelerometer or alignment (sensor-to-segment "
+                            "rotations of a body's nodes: N-pose, then flexions)")
                 ->capture_default_str();
+            cmd->add_option("--body", live.body_path,
+                            "with --live --kind alignment: the body model whose nodes are aligned (default: the "
+                            "7-segment lower body; --node picks some of its nodes)");
+            cmd->add_option(
+                   "--pose", live.pose_s,
+                   "with --live --kind alignment: the N-pose at the start lasts at least S seconds (default 3)")
+                ->check(non_negative_number(60.0));
             cmd->add_flag("--all-nodes", live.all_nodes, "with --live: every node publishing on bsn/raw");
             cmd->add_option("--duration", live.duration_s, "with --live: collect for S seconds (0: --samples only)")
                 ->capture_default_str();

@@ -16,6 +16,7 @@
 #include <map>
 #include <mutex>
 #include <numbers>
+#include <optional>
 #include <string>
 
 #include "bsn/config/body_config.hpp"
@@ -45,6 +46,10 @@ struct DemoOptions {
 };
 
 using Clock = std::chrono::steady_clock;
+
+double wall_seconds() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
 constexpr double kDeg = 180.0 / std::numbers::pi;
 
 /// Per joint: the latest estimate, the simulator's truth by sensor time (to pair each estimate with the truth of its
@@ -57,6 +62,7 @@ struct JointView {
   std::size_t writers = 1;       ///< writers of this joint within the last second (more than 1: a conflict)
   std::map<std::uint64_t, std::array<double, 3>> truth;  ///< sensor time -> anatomical angles, the last ~2 s
   double error_sq_sum = 0.0, recent_error_deg = 0.0;
+  bool has_recent_error = false;
   std::uint64_t errors = 0;
   /// The first angle's values in 0.5 deg bins over -180..180 deg: its range as percentiles, in bounded memory.
   std::array<std::uint32_t, 720> histogram{};
@@ -78,11 +84,29 @@ struct DemoView {
   bsn::Status status;
   bool have_status = false;
   std::uint64_t settled_after_ns = 0;  ///< sensor time from which estimates count in the ranges and errors
+  /// With the live alignment: estimates count from this long after the first one (the walking's start), and only
+  /// once both segments of the joint are aligned (FLAG_SEGMENT_FRAME).
+  std::optional<double> walk_start_s;
+  std::string alignment_id;  ///< the demo's alignment request
+  std::string alignment_status = "waiting for the calibration service";
+  std::map<std::string, bsn::CalibrationResult> alignment;  ///< its results, by node
 };
 
 // Seconds after the first estimate that the filters get to converge (they start in motion: the body walks from
 // the first sample) before the ranges and errors count.
 constexpr double kSettleSeconds = 8.0;
+
+/// The live error column: the largest of the three angles' errors against the truth of the same instant. Returns
+/// that truth, nullopt when it has not arrived.
+std::optional<std::array<double, 3>> score_error(JointView& v, const bsn::JointAngles& j) {
+  const auto t = v.truth.find(j.timestamp_ns());
+  if (t == v.truth.end()) return std::nullopt;
+  double worst = 0.0;
+  for (std::size_t i = 0; i < 3; ++i) worst = std::max(worst, std::abs(j.anatomical()[i] - t->second[i]) * kDeg);
+  v.recent_error_deg = worst;
+  v.has_recent_error = true;
+  return t->second;
+}
 
 void on_estimate(DemoView& view, const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo& info) {
   std::lock_guard lock(view.mutex);
@@ -95,16 +119,21 @@ void on_estimate(DemoView& view, const bsn::JointAngles& j, const eprosima::fast
   // A sample with NaN or Inf is shown flagged and counted, never scored (and never cast to a histogram bin).
   if (!v.latest_finite || j.anatomy().empty() || (j.flags() & (bsn::FLAG_INITIALISING | bsn::FLAG_STALE))) return;
   if (view.settled_after_ns == 0)
-    view.settled_after_ns = j.timestamp_ns() + static_cast<std::uint64_t>(kSettleSeconds * 1e9);
-  if (j.timestamp_ns() < view.settled_after_ns) return;
+    view.settled_after_ns =
+        j.timestamp_ns() + static_cast<std::uint64_t>((view.walk_start_s ? *view.walk_start_s : kSettleSeconds) * 1e9);
+  if (j.timestamp_ns() < view.settled_after_ns) {
+    score_error(v, j);  // the live column shows the error before the alignment too
+    return;
+  }
+  if (view.walk_start_s && !(j.flags() & bsn::FLAG_SEGMENT_FRAME)) {
+    score_error(v, j);
+    return;
+  }
   const double first = std::clamp(j.anatomical()[0] * kDeg, -180.0, 179.9);
   ++v.histogram[static_cast<std::size_t>((first + 180.0) * 2.0)];
   ++v.values;
-  if (const auto t = v.truth.find(j.timestamp_ns()); t != v.truth.end()) {
-    double worst = 0.0;
-    for (std::size_t i = 0; i < 3; ++i) worst = std::max(worst, std::abs(j.anatomical()[i] - t->second[i]) * kDeg);
-    v.recent_error_deg = worst;  // the live column: the largest of the three now
-    const double first = (j.anatomical()[0] - t->second[0]) * kDeg;
+  if (const auto t = score_error(v, j)) {
+    const double first = (j.anatomical()[0] - (*t)[0]) * kDeg;
     v.error_sq_sum += first * first;  // the summary: the first (flexion) angle's, as gait studies report it
     ++v.errors;
   }
@@ -117,8 +146,15 @@ void on_truth(DemoView& view, const bsn::JointAngles& j) {
   while (truth.size() > 256) truth.erase(truth.begin());
 }
 
-/// The scenario the demo's nodes share: the lower body walking, sensors mounted exactly along their segments (the
-/// mounting the fusion's default assumes), consumer MEMS errors with a calibrated magnetometer.
+/// The demo's lab procedure, shortened: a 2 s N-pose, two flexions of each leg of 1.5 s, a 2 s pose again, then
+/// walking on the spot (10 s after the start). The service takes a 1.5 s rest as the pose (the simulated one's
+/// edges move a little).
+constexpr double kDemoPose_s = 2.0, kDemoFlexion_s = 1.5, kDemoRequestPose_s = 1.5;
+constexpr int kDemoFlexionsPerLeg = 2;
+constexpr double kDemoWalkStart_s = 2.0 * kDemoPose_s + 2.0 * kDemoFlexionsPerLeg * kDemoFlexion_s;
+
+/// The scenario the demo's nodes share: the lower body, each sensor strapped on at a random orientation (up to 2 cm
+/// off its place), consumer MEMS errors with a calibrated magnetometer; the alignment moves, then walking.
 std::string walking_scenario(double rate_hz, double duration_s) {
   char text[1024];
   std::snprintf(text, sizeof text,
@@ -132,9 +168,12 @@ std::string walking_scenario(double rate_hz, double duration_s) {
                 "  mag: {hard_iron: [0, 0, 0], soft_iron: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}\n"
                 "body:\n"
                 "  kind: lower_body\n"
-                "  gait: {cadence_steps_per_min: 110, speed_m_s: 1.2, heading_deg: 90}\n"
-                "  mounting: {max_rotation_deg: 0, max_offset_m: 0}\n",
-                duration_s, rate_hz);
+                "  gait:\n"
+                "    cadence_steps_per_min: 110\n"
+                "    heading_deg: 90\n"
+                "    alignment: {pose_s: %g, flexions_per_leg: %d, flexion_s: %g}\n"
+                "  mounting: {max_rotation_deg: 180, max_offset_m: 0.02}\n",
+                duration_s, rate_hz, kDemoPose_s, kDemoFlexionsPerLeg, kDemoFlexion_s);
   return text;
 }
 
@@ -165,7 +204,7 @@ std::string render(DemoView& view, const std::vector<std::string>& joint_order, 
         cells += cell;
       }
       char error[16] = "-";
-      if (it->second.errors > 0) std::snprintf(error, sizeof error, "%.2f", it->second.recent_error_deg);
+      if (it->second.has_recent_error) std::snprintf(error, sizeof error, "%.2f", it->second.recent_error_deg);
       std::string flags = format_flags(j.flags());
       if (it->second.non_finite) flags += " non-finite=" + std::to_string(it->second.non_finite);
       if (it->second.writers > 1) flags += " WRITERS=" + std::to_string(it->second.writers);
@@ -190,6 +229,7 @@ std::string render(DemoView& view, const std::vector<std::string>& joint_order, 
     }
     out += line;
   }
+  if (view.walk_start_s) out += "alignment: " + view.alignment_status + "\n";
   if (view.have_status) {
     out += "nodes:";
     for (const auto& n : view.status.nodes()) {
@@ -284,6 +324,8 @@ int run_demo(const DemoOptions& opt) {
     if (!s.parent.empty()) joint_order.push_back(fusion::joint_name(s));
 
   int exit_code = 0;
+  // The nodes' common start (whole seconds, as `bsn sim --start-at` takes it): time to start them all.
+  const double start_at_s = std::floor(wall_seconds()) + 3.0;
   {
     dds::Participant participant({opt.domain, "bsn demo"});
     auto joint_reader = participant.make_reader(
@@ -300,20 +342,59 @@ int run_demo(const DemoOptions& opt) {
           view.have_status = true;
         });
 
+    // The default body walks: every node publishes its segment of one scenario from one common start, so the
+    // body moves as one; the calibration service aligns the sensors first. A body file of the user's (or --random)
+    // gives each node its own random motion on the default mounting.
+    const bool walking = opt.body_path.empty() && !opt.random;
     std::vector<std::unique_ptr<dds::ChildProcess>> sims;
-    std::unique_ptr<dds::ChildProcess> fusion_process;
+    std::unique_ptr<dds::ChildProcess> fusion_process, calibration_process;
+    std::unique_ptr<dds::Writer<bsn::CalibrationRequest>> request_writer;
+    std::unique_ptr<dds::Reader<bsn::CalibrationProgress>> progress_reader;
+    std::unique_ptr<dds::Reader<bsn::CalibrationResult>> result_reader;
+    if (walking) {
+      view.walk_start_s = kDemoWalkStart_s;
+      view.alignment_id = "demo-" + std::to_string(getpid()) + "-" + std::to_string(std::time(nullptr));
+      progress_reader = participant.make_reader(
+          dds::kCalibrationProgressTopic,
+          [&view](const bsn::CalibrationProgress& p, const eprosima::fastdds::dds::SampleInfo&) {
+            std::lock_guard lock(view.mutex);
+            if (p.request_id() != view.alignment_id || !view.alignment.empty()) return;
+            view.alignment_status = logging::printable(
+                p.phase() == bsn::CALIBRATION_PHASE_REFUSED ? "REFUSED: " + p.message() : p.instruction(), 160);
+          });
+      result_reader = participant.make_reader(
+          dds::kCalibrationResultTopic,
+          [&view](const bsn::CalibrationResult& r, const eprosima::fastdds::dds::SampleInfo&) {
+            std::lock_guard lock(view.mutex);
+            if (r.request_id() != view.alignment_id || r.kind() != bsn::CALIBRATION_SEGMENT_ALIGNMENT) return;
+            view.alignment[r.node_id()] = r;
+            std::size_t ok = 0;
+            std::string failed;
+            for (const auto& [node, result] : view.alignment) {
+              if (result.success()) {
+                ++ok;
+              } else if (failed.empty()) {
+                failed = ": " + logging::printable(result.message(), 120);
+              }
+            }
+            view.alignment_status = std::to_string(ok) + " of " + std::to_string(view.alignment.size()) +
+                                    " nodes aligned (request " + view.alignment_id + ")" + failed;
+          });
+      request_writer = participant.make_writer(dds::kCalibrationRequestTopic);
+    }
     try {
       fusion_process = std::make_unique<dds::ChildProcess>(
           std::vector<std::string>{self, "fusion", "--domain", domain, "--body", body_file},
           (dir / "fusion.log").string());
-      // The default body walks: every node publishes its segment of one scenario from one common start, so the
-      // body moves as one. A body file of the user's (or --random) gives each node its own random motion.
-      const bool walking = opt.body_path.empty() && !opt.random;
+      if (walking)
+        calibration_process = std::make_unique<dds::ChildProcess>(
+            std::vector<std::string>{self, "calibration", "--domain", domain, "--store", (dir / "store").string()},
+            (dir / "calibration.log").string());
       const std::string scenario_file = (dir / "walk.yaml").string();
       if (walking)
         std::ofstream(scenario_file) << walking_scenario(opt.rate_hz,
                                                          opt.duration_s > 0.0 ? opt.duration_s + 60.0 : 1e7);
-      const std::string start_at = std::to_string(std::time(nullptr) + 2);
+      const std::string start_at = std::to_string(static_cast<long long>(start_at_s));
       for (const auto& s : body.segments) {
         std::vector<std::string> args{self, "sim", "--domain", domain, "--node", s.node, "--segment", s.name};
         if (walking) {
@@ -359,10 +440,30 @@ int run_demo(const DemoOptions& opt) {
     const bool tty = isatty(STDOUT_FILENO) != 0;
     const auto start = Clock::now();
     auto next_draw = start;
+    bool request_sent = false;
     while (exit_code == 0 && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
       const auto now = Clock::now();
       const double elapsed = std::chrono::duration<double>(now - start).count();
       if (opt.duration_s > 0.0 && elapsed >= opt.duration_s) break;
+      // The alignment request, once the service listens (requests are VOLATILE): it collects until the walking
+      // starts, from the N-pose at the nodes' common start on.
+      if (request_writer && !request_sent && request_writer->matched() > 0 && progress_reader->matched() > 0 &&
+          result_reader->matched() > 0) {
+        bsn::CalibrationRequest request;
+        request.request_id(view.alignment_id);
+        request.node_id("*");
+        request.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+        request.body(config::body_model_to_yaml(body));
+        request.pose_s(kDemoRequestPose_s);
+        request.duration_s(std::max(kDemoWalkStart_s, start_at_s - wall_seconds() + kDemoWalkStart_s + 0.5));
+        request_writer->write(request);
+        request_sent = true;
+      }
+      if (calibration_process && !calibration_process->running()) {
+        logging::log_error("bsn calibration ended unexpectedly; see ", (dir / "calibration.log").string());
+        exit_code = 1;
+        break;
+      }
       if (!fusion_process->running()) {
         logging::log_error("bsn fusion ended unexpectedly; see ", (dir / "fusion.log").string());
         exit_code = 1;
@@ -379,6 +480,10 @@ int run_demo(const DemoOptions& opt) {
     if (view_process) view_process->stop();
     // Sensors first, so the fusion service sees them go before it stops itself.
     for (auto& s : sims) s->stop();
+    if (calibration_process && calibration_process->stop() != std::optional<int>(0) && exit_code == 0) {
+      logging::log_error("bsn calibration did not stop cleanly; see ", (dir / "calibration.log").string());
+      exit_code = 1;
+    }
     if (fusion_process && fusion_process->stop() != std::optional<int>(0) && exit_code == 0) {
       logging::log_error("bsn fusion did not stop cleanly; see ", (dir / "fusion.log").string());
       exit_code = 1;
@@ -407,6 +512,17 @@ int run_demo(const DemoOptions& opt) {
                 name.c_str(), logging::printable(v.latest.anatomical_names()[0], 32).c_str(), v.percentile(0.02),
                 v.percentile(0.98), std::sqrt(v.error_sq_sum / static_cast<double>(v.errors)),
                 static_cast<unsigned long long>(v.errors));
+  }
+  if (view.walk_start_s) {
+    std::printf("bsn demo: alignment: %s\n", view.alignment_status.c_str());
+    const bool all_aligned =
+        view.alignment.size() == body.segments.size() &&
+        std::all_of(view.alignment.begin(), view.alignment.end(), [](const auto& r) { return r.second.success(); });
+    // Only a run long enough to reach the walking is judged by its alignment.
+    if (!all_aligned && exit_code == 0 && (opt.duration_s == 0.0 || opt.duration_s > kDemoWalkStart_s + 6.0)) {
+      logging::log_error("the alignment did not align every node; logs kept in ", dir.string());
+      exit_code = 1;
+    }
   }
   if (joints_seen < joint_order.size() && exit_code == 0) {
     logging::log_error("some joints never produced angles; logs kept in ", dir.string());
