@@ -498,7 +498,7 @@ void CalibrationService::refuse_alignment(const std::string& request_id, const s
   std::size_t written = 0;
   for (const std::string& node : nodes) {
     if (node.empty() || node.size() > kMaxNodeIdLength || ++written > 64) continue;
-    result_writer_->write(alignment_message(node, request_id, {}, false, "node '" + node + "': " + why));
+    result_writer_->write(alignment_message(node, request_id, {}, false, "refused: " + why));
     if (const auto good = last_success_.find({node, static_cast<int>(calib::CalibrationKind::alignment)});
         good != last_success_.end())
       result_writer_->write(good->second);
@@ -598,7 +598,11 @@ void CalibrationService::finish_alignment(Run& run, std::uint64_t now, const std
     const calib::NodeAlignment& a = r.nodes[i];
     config::AlignmentRecord record{nodes[i].segment,    a.sensor_to_segment,  a.source,
                                    a.relative_residual, a.axis_observability, run.alignment->samples(i)};
-    const std::string message = a.success ? "" : "node '" + nodes[i].node + "': " + a.message;
+    // A failure of the whole body (a silent node, no pose, another clock) says so; a segment's own names the node.
+    const std::string message = a.success ? ""
+                                : !r.problem.empty() && a.message == r.problem
+                                    ? "the body's alignment failed: " + a.message
+                                    : "node '" + nodes[i].node + "': " + a.message;
     if (!a.success) logging::log_warn("request '", run.id, "': ", message);
     const bsn::CalibrationResult m = alignment_message(nodes[i].node, run.id, record, a.success, message);
     result_writer_->write(m);

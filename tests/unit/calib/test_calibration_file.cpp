@@ -76,7 +76,8 @@ TEST_F(TempDir, BadFilesNameTheLineAndTheProblem) {
             "bad.yaml:2: magnetometer transform is singular");
   EXPECT_NE(message("magnetometr:\n  bias: [1, 2, 3]\n").find("bad.yaml:1: unknown key 'magnetometr'"),
             std::string::npos);
-  EXPECT_EQ(message("node: a\n"), "bad.yaml:1: the calibration file holds no magnetometer, accelerometer or gyroscope");
+  EXPECT_EQ(message("node: a\n"),
+            "bad.yaml:1: the calibration file holds no magnetometer, accelerometer, gyroscope or alignment");
   EXPECT_NE(message("magnetometer: [\n").find("YAML syntax error"), std::string::npos);
   EXPECT_THROW((void)load_calibration_file((dir_ / "missing.yaml").string()), ConfigError);
 }
