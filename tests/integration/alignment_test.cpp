@@ -11,8 +11,12 @@
 #include <map>
 #include <mutex>
 #include <numbers>
+#include <regex>
 
 #include "bsn/dds/participant.hpp"
+#include "bsn/fusion/rotation.hpp"
+#include "bsn/sim/scenario.hpp"
+#include "bsn/sim/scenario_file.hpp"
 #include "process_fixture.hpp"
 
 namespace bsn::integration {
@@ -230,6 +234,35 @@ TEST_F(Alignment, BadRequestsGetTheirErrorOnTheResultTopic) {
       10s));
   std::lock_guard lock(mutex);
   EXPECT_NE(progress["again"].phase(), bsn::CALIBRATION_PHASE_REFUSED) << progress["again"].message();
+}
+
+TEST_F(Alignment, OfflineFromARecordingOfTheProcedure) {
+  // The shipped lab-procedure scenario as a recording (DIR/<segment>.hdf5), aligned offline: each node's file holds
+  // the simulator's mounting within the bound of the live alignment (5 deg; consumer MEMS errors).
+  const std::string scenario = std::string(BSN_SCENARIO_DIR) + "/gait_alignment.yaml";
+  const std::string lab = (dir() / "lab").string();
+  auto& sim = spawn("sim", {"sim", "--scenario", scenario, "--out", lab});
+  ASSERT_TRUE(exited_cleanly(sim.wait_for(60s))) << read_file(log_path("sim"));
+  auto& align = spawn("align", {"calibrate", "--alignment", lab});
+  ASSERT_TRUE(exited_cleanly(align.wait_for(60s))) << read_file(log_path("align"));
+  const sim::Body body = sim::build_body(sim::load_scenario(scenario));
+  for (std::size_t i = 0; i < body.size(); ++i) {
+    const std::string node = body.segment(i).name;
+    SCOPED_TRACE(node);
+    const std::string text = read_file(dir() / "lab" / (node + ".alignment.calib.yaml"));
+    std::smatch m;
+    const std::string number = R"(\s*(-?[\d.eE+-]+)\s*)";
+    ASSERT_TRUE(std::regex_search(text, m, std::regex("sensor_to_segment: \\[" + number + "," + number + "," + number +
+                                                      "," + number + "\\]")))
+        << text;
+    const fusion::Quat q(std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str()), std::stod(m[4].str()));
+    EXPECT_LT(fusion::angle_between(q.normalized(), sim::true_sensor_to_segment(body.segment(i))) * kDeg, 5.0);
+  }
+  // A folder without a node's recording: a usage error naming the file.
+  std::filesystem::remove(dir() / "lab" / "foot_r.hdf5");
+  auto& missing = spawn("missing", {"calibrate", "--alignment", lab});
+  EXPECT_EQ(exit_code(missing.wait_for(60s)), 2);
+  EXPECT_NE(read_file(log_path("missing")).find("foot_r.hdf5 is missing"), std::string::npos);
 }
 
 }  // namespace
