@@ -252,8 +252,8 @@ TEST_F(Alignment, OfflineFromARecordingOfTheProcedure) {
     const std::string text = read_file(dir() / "lab" / (node + ".alignment.calib.yaml"));
     std::smatch m;
     const std::string number = R"(\s*(-?[\d.eE+-]+)\s*)";
-    ASSERT_TRUE(std::regex_search(text, m, std::regex("sensor_to_segment: \\[" + number + "," + number + "," + number +
-                                                      "," + number + "\\]")))
+    ASSERT_TRUE(std::regex_search(
+        text, m, std::regex("sensor_to_segment: \\[" + number + "," + number + "," + number + "," + number + "\\]")))
         << text;
     const fusion::Quat q(std::stod(m[1].str()), std::stod(m[2].str()), std::stod(m[3].str()), std::stod(m[4].str()));
     EXPECT_LT(fusion::angle_between(q.normalized(), sim::true_sensor_to_segment(body.segment(i))) * kDeg, 5.0);
