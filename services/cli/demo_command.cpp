@@ -150,6 +150,8 @@ void on_truth(DemoView& view, const bsn::JointAngles& j) {
 /// walking on the spot (10 s after the start). The service takes a 1.5 s rest as the pose (the simulated one's
 /// edges move a little).
 constexpr double kDemoPose_s = 2.0, kDemoFlexion_s = 1.5, kDemoRequestPose_s = 1.5;
+/// The nodes start this long after the processes are started, s (a process and its DDS discovery need ~1 s).
+constexpr double kDemoStartDelay_s = 2.0;
 constexpr int kDemoFlexionsPerLeg = 2;
 constexpr double kDemoWalkStart_s = 2.0 * kDemoPose_s + 2.0 * kDemoFlexionsPerLeg * kDemoFlexion_s;
 
@@ -324,8 +326,6 @@ int run_demo(const DemoOptions& opt) {
     if (!s.parent.empty()) joint_order.push_back(fusion::joint_name(s));
 
   int exit_code = 0;
-  // The nodes' common start (whole seconds, as `bsn sim --start-at` takes it): time to start them all.
-  const double start_at_s = std::floor(wall_seconds()) + 3.0;
   {
     dds::Participant participant({opt.domain, "bsn demo"});
     auto joint_reader = participant.make_reader(
@@ -352,7 +352,7 @@ int run_demo(const DemoOptions& opt) {
     std::unique_ptr<dds::Reader<bsn::CalibrationProgress>> progress_reader;
     std::unique_ptr<dds::Reader<bsn::CalibrationResult>> result_reader;
     if (walking) {
-      view.walk_start_s = kDemoWalkStart_s;
+      view.walk_start_s = kDemoWalkStart_s + 0.5;
       view.alignment_id = "demo-" + std::to_string(getpid()) + "-" + std::to_string(std::time(nullptr));
       progress_reader = participant.make_reader(
           dds::kCalibrationProgressTopic,
@@ -383,18 +383,38 @@ int run_demo(const DemoOptions& opt) {
       request_writer = participant.make_writer(dds::kCalibrationRequestTopic);
     }
     try {
-      fusion_process = std::make_unique<dds::ChildProcess>(
-          std::vector<std::string>{self, "fusion", "--domain", domain, "--body", body_file},
-          (dir / "fusion.log").string());
-      if (walking)
+      if (walking) {
+        // The calibration service first: the alignment request must reach it before the nodes' N-pose begins.
         calibration_process = std::make_unique<dds::ChildProcess>(
             std::vector<std::string>{self, "calibration", "--domain", domain, "--store", (dir / "store").string()},
             (dir / "calibration.log").string());
+        const auto deadline = Clock::now() + std::chrono::seconds(20);
+        while ((request_writer->matched() == 0 || progress_reader->matched() == 0 || result_reader->matched() == 0) &&
+               calibration_process->running() && Clock::now() < deadline &&
+               dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
+        }
+        if (request_writer->matched() == 0 || progress_reader->matched() == 0 || result_reader->matched() == 0)
+          throw std::runtime_error("bsn calibration did not answer; see " + (dir / "calibration.log").string());
+        // It collects from the nodes' common start (the N-pose) until just after the walking starts.
+        bsn::CalibrationRequest request;
+        request.request_id(view.alignment_id);
+        request.node_id("*");
+        request.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+        request.body(config::body_model_to_yaml(body));
+        request.pose_s(kDemoRequestPose_s);
+        request.duration_s(kDemoStartDelay_s + kDemoWalkStart_s + 0.5);
+        request_writer->write(request);
+      }
+      fusion_process = std::make_unique<dds::ChildProcess>(
+          std::vector<std::string>{self, "fusion", "--domain", domain, "--body", body_file},
+          (dir / "fusion.log").string());
       const std::string scenario_file = (dir / "walk.yaml").string();
       if (walking)
         std::ofstream(scenario_file) << walking_scenario(opt.rate_hz,
                                                          opt.duration_s > 0.0 ? opt.duration_s + 60.0 : 1e7);
-      const std::string start_at = std::to_string(static_cast<long long>(start_at_s));
+      // The nodes' common start: time for every process to be up.
+      char start_at[32];
+      std::snprintf(start_at, sizeof start_at, "%.3f", wall_seconds() + kDemoStartDelay_s);
       for (const auto& s : body.segments) {
         std::vector<std::string> args{self, "sim", "--domain", domain, "--node", s.node, "--segment", s.name};
         if (walking) {
@@ -440,25 +460,10 @@ int run_demo(const DemoOptions& opt) {
     const bool tty = isatty(STDOUT_FILENO) != 0;
     const auto start = Clock::now();
     auto next_draw = start;
-    bool request_sent = false;
     while (exit_code == 0 && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
       const auto now = Clock::now();
       const double elapsed = std::chrono::duration<double>(now - start).count();
       if (opt.duration_s > 0.0 && elapsed >= opt.duration_s) break;
-      // The alignment request, once the service listens (requests are VOLATILE): it collects until the walking
-      // starts, from the N-pose at the nodes' common start on.
-      if (request_writer && !request_sent && request_writer->matched() > 0 && progress_reader->matched() > 0 &&
-          result_reader->matched() > 0) {
-        bsn::CalibrationRequest request;
-        request.request_id(view.alignment_id);
-        request.node_id("*");
-        request.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
-        request.body(config::body_model_to_yaml(body));
-        request.pose_s(kDemoRequestPose_s);
-        request.duration_s(std::max(kDemoWalkStart_s, start_at_s - wall_seconds() + kDemoWalkStart_s + 0.5));
-        request_writer->write(request);
-        request_sent = true;
-      }
       if (calibration_process && !calibration_process->running()) {
         logging::log_error("bsn calibration ended unexpectedly; see ", (dir / "calibration.log").string());
         exit_code = 1;

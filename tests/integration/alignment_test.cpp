@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
 #include <map>
 #include <mutex>
@@ -61,6 +62,7 @@ struct Seen {
   std::map<std::string, bsn::CalibrationResult> results;  ///< alignment results, by node
   std::map<std::string, std::uint32_t> orientation_flags;
   std::uint64_t first_ns = 0;
+  bool accepted = false;  ///< the service's progress of the request arrived
 };
 
 double rms(double sum_sq, std::size_t n) { return n ? std::sqrt(sum_sq / static_cast<double>(n)) : -1.0; }
@@ -98,6 +100,11 @@ TEST_F(Alignment, TheServiceAlignsALegAndFusionAppliesItLive) {
     std::lock_guard lock(seen.mutex);
     seen.orientation_flags[o.segment()] = o.flags();
   });
+  auto progress =
+      participant.make_reader(dds::kCalibrationProgressTopic, [&](const bsn::CalibrationProgress& p, const auto&) {
+        std::lock_guard lock(seen.mutex);
+        seen.accepted = seen.accepted || p.request_id() == "leg-1";
+      });
   auto results =
       participant.make_reader(dds::kCalibrationResultTopic, [&](const bsn::CalibrationResult& r, const auto&) {
         if (r.kind() != bsn::CALIBRATION_SEGMENT_ALIGNMENT) return;
@@ -110,16 +117,28 @@ TEST_F(Alignment, TheServiceAlignsALegAndFusionAppliesItLive) {
   const std::string store = (dir() / "store").string();
   spawn("calibration", {"calibration", "--domain", d, "--store", store});
   spawn("fusion", {"fusion", "--domain", d, "--body", (dir() / "body.yaml").string()});
-  // A common start far enough ahead for every process to be up: the N-pose must be in the collection.
-  const std::time_t start_at = std::time(nullptr) + 4;
-  for (const char* node : {"thigh_l", "shank_l", "foot_l"})
-    spawn(std::string("sim-") + node, {"sim", "--scenario", (dir() / "walk.yaml").string(), "--node", node, "--domain",
-                                       d, "--start-at", std::to_string(start_at)});
-  // Collect until shortly after the walking starts (the client's duration runs from the request).
-  const double duration = static_cast<double>(start_at - std::time(nullptr)) + kWalkStart_s + 1.0;
+  // The request first (the client waits for the service); the nodes start once the service has accepted it, so
+  // their N-pose is collected. It collects until shortly after the walking starts (the flexions end at the rest
+  // before it; the slack only covers the client's discovery).
+  constexpr double kStartDelay_s = 2.0;
+  const double duration = kStartDelay_s + kWalkStart_s + 4.0;
   auto& client =
       spawn("client", {"calibrate", "--live", "--kind", "alignment", "--body", (dir() / "body.yaml").string(), "--pose",
                        "1.5", "--duration", std::to_string(duration), "--domain", d, "--request-id", "leg-1"});
+  ASSERT_TRUE(wait_until(
+      [&] {
+        std::lock_guard lock(seen.mutex);
+        return seen.accepted;
+      },
+      30s))
+      << read_file(log_path("client")) << read_file(log_path("calibration"));
+  char start_at[32];
+  std::snprintf(
+      start_at, sizeof start_at, "%.3f",
+      std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count() + kStartDelay_s);
+  for (const char* node : {"thigh_l", "shank_l", "foot_l"})
+    spawn(std::string("sim-") + node,
+          {"sim", "--scenario", (dir() / "walk.yaml").string(), "--node", node, "--domain", d, "--start-at", start_at});
   const auto status = client.wait_for(std::chrono::milliseconds(static_cast<int>((duration + 30.0) * 1000)));
   ASSERT_TRUE(status.has_value()) << "the client did not end";
   EXPECT_TRUE(exited_cleanly(status)) << describe_status(status) << "\n" << read_file(log_path("client"));
