@@ -238,7 +238,7 @@ AlignmentProgress AlignmentSession::progress(std::uint64_t now_ns) {
   const double min_rate = params_.fit.hinge.min_rate_rad_s;
   bool all_moved = true;
   std::string behind;
-  double behind_s = std::numeric_limits<double>::infinity();
+  double behind_s = 0.0;
   for (std::size_t i = 0; i < nodes_.size(); ++i) {
     const AlignmentNode& n = nodes_[i];
     if (n.parent < 0 || n.flexion_sign == 0) continue;
@@ -252,7 +252,8 @@ AlignmentProgress AlignmentSession::progress(std::uint64_t now_ns) {
                                " of " + one_decimal(params_.min_moving_s) + " s";
     if (out.moving_s[i] < params_.min_moving_s) {
       all_moved = false;
-      if (out.moving_s[i] < behind_s) {
+      // The first joint of the body's order still short of movement: the procedure's order (left leg first).
+      if (behind.empty()) {
         behind_s = out.moving_s[i];
         behind = n.joint.empty() ? n.segment : n.joint;
       }
