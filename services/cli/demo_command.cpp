@@ -61,6 +61,9 @@ struct JointView {
   std::uint64_t non_finite = 0;  ///< samples with non-finite numbers
   std::size_t writers = 1;       ///< writers of this joint within the last second (more than 1: a conflict)
   std::map<std::uint64_t, std::array<double, 3>> truth;  ///< sensor time -> anatomical angles, the last ~2 s
+  /// Estimates whose truth has not arrived yet (the simulator's and the fusion's samples race), sensor time ->
+  /// anatomical angles and whether it counts in the summary: scored when the truth comes, the last ~2 s.
+  std::map<std::uint64_t, std::pair<std::array<double, 3>, bool>> waiting;
   double error_sq_sum = 0.0, recent_error_deg = 0.0;
   bool has_recent_error = false;
   std::uint64_t errors = 0;
@@ -96,16 +99,29 @@ struct DemoView {
 // the first sample) before the ranges and errors count.
 constexpr double kSettleSeconds = 8.0;
 
-/// The live error column: the largest of the three angles' errors against the truth of the same instant. Returns
-/// that truth, nullopt when it has not arrived.
-std::optional<std::array<double, 3>> score_error(JointView& v, const bsn::JointAngles& j) {
-  const auto t = v.truth.find(j.timestamp_ns());
-  if (t == v.truth.end()) return std::nullopt;
+/// Scores an estimate against the truth of its instant: the live error column (the largest of the three angles'
+/// errors) and, if it counts, the summary (the first, flexion, angle's, as gait studies report it).
+void score(JointView& v, const std::array<double, 3>& estimate, const std::array<double, 3>& truth, bool counts) {
   double worst = 0.0;
-  for (std::size_t i = 0; i < 3; ++i) worst = std::max(worst, std::abs(j.anatomical()[i] - t->second[i]) * kDeg);
+  for (std::size_t i = 0; i < 3; ++i) worst = std::max(worst, std::abs(estimate[i] - truth[i]) * kDeg);
   v.recent_error_deg = worst;
   v.has_recent_error = true;
-  return t->second;
+  if (!counts) return;
+  const double first = (estimate[0] - truth[0]) * kDeg;
+  v.error_sq_sum += first * first;
+  ++v.errors;
+}
+
+/// Pairs an estimate with the truth of its instant now, or when the truth arrives. Every estimate is scored,
+/// whichever of the two arrives first: scoring only those whose truth came first would keep the ones the fusion
+/// computed late, a biased share.
+void pair_with_truth(JointView& v, const bsn::JointAngles& j, bool counts) {
+  if (const auto t = v.truth.find(j.timestamp_ns()); t != v.truth.end()) {
+    score(v, j.anatomical(), t->second, counts);
+    return;
+  }
+  v.waiting[j.timestamp_ns()] = {j.anatomical(), counts};
+  while (v.waiting.size() > 256) v.waiting.erase(v.waiting.begin());
 }
 
 void on_estimate(DemoView& view, const bsn::JointAngles& j, const eprosima::fastdds::dds::SampleInfo& info) {
@@ -121,29 +137,26 @@ void on_estimate(DemoView& view, const bsn::JointAngles& j, const eprosima::fast
   if (view.settled_after_ns == 0)
     view.settled_after_ns =
         j.timestamp_ns() + static_cast<std::uint64_t>((view.walk_start_s ? *view.walk_start_s : kSettleSeconds) * 1e9);
-  if (j.timestamp_ns() < view.settled_after_ns) {
-    score_error(v, j);  // the live column shows the error before the alignment too
-    return;
+  // The live column shows the error before the alignment too; the summary counts the settled (and aligned) part.
+  const bool counts =
+      j.timestamp_ns() >= view.settled_after_ns && (!view.walk_start_s || (j.flags() & bsn::FLAG_SEGMENT_FRAME));
+  if (counts) {
+    const double first = std::clamp(j.anatomical()[0] * kDeg, -180.0, 179.9);
+    ++v.histogram[static_cast<std::size_t>((first + 180.0) * 2.0)];
+    ++v.values;
   }
-  if (view.walk_start_s && !(j.flags() & bsn::FLAG_SEGMENT_FRAME)) {
-    score_error(v, j);
-    return;
-  }
-  const double first = std::clamp(j.anatomical()[0] * kDeg, -180.0, 179.9);
-  ++v.histogram[static_cast<std::size_t>((first + 180.0) * 2.0)];
-  ++v.values;
-  if (const auto t = score_error(v, j)) {
-    const double first = (j.anatomical()[0] - (*t)[0]) * kDeg;
-    v.error_sq_sum += first * first;  // the summary: the first (flexion) angle's, as gait studies report it
-    ++v.errors;
-  }
+  pair_with_truth(v, j, counts);
 }
 
 void on_truth(DemoView& view, const bsn::JointAngles& j) {
   std::lock_guard lock(view.mutex);
-  auto& truth = view.joints[j.joint()].truth;
-  truth[j.timestamp_ns()] = j.anatomical();
-  while (truth.size() > 256) truth.erase(truth.begin());
+  JointView& v = view.joints[j.joint()];
+  if (const auto w = v.waiting.find(j.timestamp_ns()); w != v.waiting.end()) {
+    score(v, w->second.first, j.anatomical(), w->second.second);
+    v.waiting.erase(w);
+  }
+  v.truth[j.timestamp_ns()] = j.anatomical();
+  while (v.truth.size() > 256) v.truth.erase(v.truth.begin());
 }
 
 /// The demo's lab procedure, shortened: a 2 s N-pose, two flexions of each leg of 1.5 s, a 2 s pose again, then
