@@ -51,6 +51,8 @@ const char* kind_name(CalibrationKind kind) {
       return "gyro-bias";
     case CalibrationKind::accelerometer:
       return "accelerometer";
+    case CalibrationKind::alignment:
+      return "alignment";
   }
   return "unknown";
 }
@@ -59,10 +61,12 @@ std::optional<CalibrationKind> parse_kind(std::string_view name) {
   if (name == "magnetometer") return CalibrationKind::magnetometer;
   if (name == "gyro-bias" || name == "gyro_bias") return CalibrationKind::gyro_bias;
   if (name == "accelerometer") return CalibrationKind::accelerometer;
+  if (name == "alignment") return CalibrationKind::alignment;
   return std::nullopt;
 }
 
 std::string validate(const SessionParams& p) {
+  if (p.kind == CalibrationKind::alignment) return "the alignment is collected by an AlignmentSession, for a body";
   if (!std::isfinite(p.duration_s) || p.duration_s < 0.0)
     return "duration_s must be a finite number >= 0 (got " + std::to_string(p.duration_s) + ")";
   if (p.duration_s > p.max_duration_s)

@@ -240,6 +240,7 @@ BodyAlignment align_body(std::span<const AlignmentSegment> segments, const Align
       if ((*earth[i] * lateral).dot(right) < 0.0) lateral = -lateral;
       r.source = "hinge " + segments[best->parent].name + "-" + segments[best->child].name;
       r.relative_residual = best->relative;
+      r.axis_observability = best->child == i ? best->fit.child_observability : best->fit.parent_observability;
     } else {
       lateral = earth[i]->transpose() * right;  // earth to sensor coordinates
       r.source = "pose heading";

@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "bsn/calib/calibration_session.hpp"
+#include "bsn/config/body_config.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "calibration_service.hpp"
 #include "command.hpp"
@@ -38,7 +39,7 @@ std::string bar(double fraction) {
          std::string(static_cast<std::size_t>(width - full), '.') + "]";
 }
 
-std::string progress_line(const bsn::CalibrationProgress& p) {
+std::string progress_line(const bsn::CalibrationProgress& p, bool alignment) {
   char head[96];
   if (p.seconds_left() >= 0.0)
     std::snprintf(head, sizeof head, "%s %3.0f%% %5.1f s left", bar(p.fraction()).c_str(), 100.0 * p.fraction(),
@@ -46,7 +47,11 @@ std::string progress_line(const bsn::CalibrationProgress& p) {
   else
     std::snprintf(head, sizeof head, "%s %3.0f%%", bar(p.fraction()).c_str(), 100.0 * p.fraction());
   std::string line = head;
-  if (p.nodes().size() == 1) {
+  if (alignment) {
+    std::uint32_t least = p.nodes().empty() ? 0u : p.nodes()[0].samples();
+    for (const auto& n : p.nodes()) least = std::min(least, n.samples());
+    line += " | " + std::to_string(p.nodes().size()) + " nodes, >= " + std::to_string(least) + " samples each";
+  } else if (p.nodes().size() == 1) {
     const auto& n = p.nodes()[0];
     char buf[128];
     std::snprintf(buf, sizeof buf, " | %u poses, %u/8 octants, coverage %.2f", n.poses(), n.octants(),
@@ -61,12 +66,22 @@ std::string progress_line(const bsn::CalibrationProgress& p) {
 }
 
 void print_result(const bsn::CalibrationResult& r) {
-  const char* kind = r.kind() == bsn::CALIBRATION_MAGNETOMETER    ? "magnetometer"
-                     : r.kind() == bsn::CALIBRATION_GYRO_BIAS     ? "gyro bias"
-                     : r.kind() == bsn::CALIBRATION_ACCELEROMETER ? "accelerometer"
-                                                                  : "unknown kind";
+  const char* kind = r.kind() == bsn::CALIBRATION_MAGNETOMETER        ? "magnetometer"
+                     : r.kind() == bsn::CALIBRATION_GYRO_BIAS         ? "gyro bias"
+                     : r.kind() == bsn::CALIBRATION_ACCELEROMETER     ? "accelerometer"
+                     : r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT ? "alignment"
+                                                                      : "unknown kind";
   if (!r.success()) {
     std::printf("%s: %s FAILED: %s\n", r.node_id().c_str(), kind, r.message().c_str());
+    return;
+  }
+  if (r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT) {
+    const auto& q = r.sensor_to_segment();
+    std::printf("%s: aligned to segment %s (request %s, %u samples, %s", r.node_id().c_str(), r.segment().c_str(),
+                r.request_id().c_str(), r.sample_count(), r.alignment_source().c_str());
+    if (r.axis_observability() > 0.0)
+      std::printf(", hinge residual %.3f, axis observability %.3f", r.hinge_residual(), r.axis_observability());
+    std::printf(")\n  sensor_to_segment = [%.6f, %.6f, %.6f, %.6f]\n", q[0], q[1], q[2], q[3]);
     return;
   }
   const auto& b = r.bias();
@@ -93,18 +108,38 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
                  opt.kind.c_str());
     return 2;
   }
-  if (opt.node.empty() == !opt.all_nodes) {
+  const bool alignment = *kind == calib::CalibrationKind::alignment;
+  if (!opt.node.empty() && opt.all_nodes) {
+    std::fprintf(stderr, "bsn calibrate: --live takes one of --node ID or --all-nodes, not both\n");
+    return 2;
+  }
+  if (opt.node.empty() && !opt.all_nodes && !alignment) {
     std::fprintf(stderr, "bsn calibrate: --live needs exactly one of --node ID or --all-nodes\n");
     return 2;
   }
+  if (!alignment && (!opt.body_path.empty() || opt.pose_s != 0.0)) {
+    std::fprintf(stderr, "bsn calibrate: --body and --pose go with --kind alignment\n");
+    return 2;
+  }
+  std::string body_text;
+  if (!opt.body_path.empty()) {
+    try {
+      body_text = config::body_model_to_yaml(config::load_body_model(opt.body_path));
+    } catch (const config::ConfigError& e) {
+      std::fprintf(stderr, "bsn calibrate: error: %s\n", e.what());
+      return 2;
+    }
+  }
   bsn::CalibrationRequest request;
   request.request_id(opt.request_id.empty() ? default_request_id() : opt.request_id);
-  request.node_id(opt.all_nodes ? "*" : opt.node);
+  request.node_id(opt.all_nodes || opt.node.empty() ? "*" : opt.node);
   request.kind(to_wire(*kind));
   request.duration_s(opt.duration_s);
   request.sample_count(opt.sample_count);
   request.until_good(opt.until_good);
   request.field_magnitude(opt.field_magnitude);
+  request.body(body_text);
+  request.pose_s(opt.pose_s);
 
   DdsCommandFrame frame(opt.domain, "bsn calibrate --live");
   std::mutex mutex;
@@ -165,7 +200,7 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
         return 1;
       }
       if (p.phase() == bsn::CALIBRATION_PHASE_DONE && !done_at) done_at = Clock::now();
-      const std::string line = progress_line(p);
+      const std::string line = progress_line(p, alignment);
       if (tty) {
         std::fprintf(stderr, "\r\033[K%s", line.c_str());
       } else if (p.instruction() != last_instruction || since(last_line_at) >= 1.0) {

@@ -9,7 +9,7 @@ namespace bsn::services {
 struct LiveCalibrationOptions {
   std::string node;                   ///< node id, or a comma-separated list
   bool all_nodes = false;             ///< every node publishing on bsn/raw (node_id "*")
-  std::string kind = "magnetometer";  ///< magnetometer, gyro-bias, accelerometer
+  std::string kind = "magnetometer";  ///< magnetometer, gyro-bias, accelerometer, alignment
   double duration_s = 60.0;           ///< collection time, s (0: sample_count only)
   unsigned sample_count = 0;          ///< or this many samples per node
   bool until_good = false;            ///< end as soon as the quality report is good enough
@@ -17,6 +17,8 @@ struct LiveCalibrationOptions {
   std::string request_id;             ///< "" = <host>-<pid>-<time>
   double service_timeout_s = 5.0;     ///< give up when no calibration service is found within this, s
   int domain = 0;
+  std::string body_path;  ///< alignment: the body model file ("" = the default lower body)
+  double pose_s = 0.0;    ///< alignment: the N-pose's length, s (0: the service's default, 3 s)
 };
 
 /// Runs the client; returns the exit code: 0 every node calibrated, 1 a failure, refusal, cancel or a lost

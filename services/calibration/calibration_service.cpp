@@ -5,6 +5,8 @@
 #include <cmath>
 #include <sstream>
 
+#include "bsn/config/body_config.hpp"
+#include "bsn/config/calibration_file.hpp"
 #include "bsn/dds/conversions.hpp"
 #include "bsn/logging/log.hpp"
 
@@ -79,7 +81,71 @@ bsn::CalibrationResult result_message(const std::string& node, const std::string
   return m;
 }
 
+bsn::CalibrationResult alignment_message(const std::string& node, const std::string& request_id,
+                                         const config::AlignmentRecord& a, bool success, const std::string& message) {
+  bsn::CalibrationResult m;
+  m.node_id(node);
+  m.request_id(request_id);
+  m.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+  m.success(success);
+  m.transform(arr(calib::Mat3::Identity().eval()));
+  m.segment(a.segment);
+  const calib::Quat& q = a.sensor_to_segment;
+  m.sensor_to_segment({q.w(), q.x(), q.y(), q.z()});
+  m.alignment_source(a.source);
+  m.hinge_residual(a.hinge_residual);
+  m.axis_observability(a.axis_observability);
+  m.sample_count(static_cast<std::uint32_t>(a.samples));
+  m.message(message);
+  return m;
+}
+
 }  // namespace
+
+std::vector<calib::AlignmentNode> alignment_nodes(const fusion::BodyModel& body, const std::vector<std::string>& wanted,
+                                                  std::string& problem) {
+  std::vector<calib::AlignmentNode> out;
+  for (const std::string& node : wanted) {
+    const bool known = std::any_of(body.segments.begin(), body.segments.end(),
+                                   [&node](const fusion::SegmentSpec& s) { return s.node == node; });
+    if (!known) {
+      std::string nodes;
+      for (const auto& s : body.segments) nodes += (nodes.empty() ? "" : ", ") + s.node;
+      problem = "node '" + logging::printable(node, 64) + "' is on no segment of the body (its nodes: " + nodes + ")";
+      return {};
+    }
+  }
+  // Parents first: a segment is added once its parent is (or its parent is not aligned).
+  std::vector<bool> added(body.segments.size(), false);
+  std::vector<int> index_of(body.segments.size(), -1);
+  auto included = [&](std::size_t i) {
+    return wanted.empty() || std::find(wanted.begin(), wanted.end(), body.segments[i].node) != wanted.end();
+  };
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (std::size_t i = 0; i < body.segments.size(); ++i) {
+      if (added[i] || !included(i)) continue;
+      const fusion::SegmentSpec& s = body.segments[i];
+      const auto parent = body.find_segment(s.parent);
+      if (parent && included(*parent) && !added[*parent]) continue;  // later, after its parent
+      calib::AlignmentNode n;
+      n.node = s.node;
+      n.segment = s.name;
+      n.joint = s.parent.empty() ? "" : fusion::joint_name(s);
+      n.parent = parent && included(*parent) ? index_of[*parent] : -1;
+      const fusion::JointType type = fusion::joint_convention(s).type;
+      n.flexion_sign = s.parent.empty()                                                       ? 0
+                       : type == fusion::JointType::kKnee                                     ? -1
+                       : type == fusion::JointType::kHip || type == fusion::JointType::kAnkle ? 1
+                                                                                              : 0;
+      index_of[i] = static_cast<int>(out.size());
+      added[i] = true;
+      out.push_back(std::move(n));
+      progress = true;
+    }
+  }
+  return out;
+}
 
 bsn::CalibrationKind to_wire(calib::CalibrationKind kind) {
   switch (kind) {
@@ -89,6 +155,8 @@ bsn::CalibrationKind to_wire(calib::CalibrationKind kind) {
       return bsn::CALIBRATION_GYRO_BIAS;
     case calib::CalibrationKind::accelerometer:
       return bsn::CALIBRATION_ACCELEROMETER;
+    case calib::CalibrationKind::alignment:
+      return bsn::CALIBRATION_SEGMENT_ALIGNMENT;
   }
   return bsn::CALIBRATION_MAGNETOMETER;
 }
@@ -101,6 +169,8 @@ std::optional<calib::CalibrationKind> from_wire(bsn::CalibrationKind kind) {
       return calib::CalibrationKind::gyro_bias;
     case bsn::CALIBRATION_ACCELEROMETER:
       return calib::CalibrationKind::accelerometer;
+    case bsn::CALIBRATION_SEGMENT_ALIGNMENT:
+      return calib::CalibrationKind::alignment;
   }
   return std::nullopt;
 }
@@ -139,6 +209,14 @@ void CalibrationService::publish_stored() {
   const std::vector<StoredCalibration> stored = store_.load_all(problems);
   for (const std::string& p : problems) logging::log_warn(p, "; that calibration is skipped");
   for (const StoredCalibration& s : stored) {
+    if (s.kind == calib::CalibrationKind::alignment) {
+      const bsn::CalibrationResult m =
+          alignment_message(s.node, s.document.request_id.empty() ? "stored" : s.document.request_id,
+                            *s.document.alignment, true, "from the store: " + s.path);
+      result_writer_->write(m);
+      last_success_[{s.node, static_cast<int>(s.kind)}] = m;
+      continue;
+    }
     bsn::CalibrationResult m;
     m.node_id(s.node);
     m.request_id(s.document.request_id.empty() ? "stored" : s.document.request_id);
@@ -212,7 +290,11 @@ void CalibrationService::on_request(const bsn::CalibrationRequest& request) {
   const std::optional<calib::CalibrationKind> kind = from_wire(request.kind());
   if (!kind) {
     refuse(id, "unknown kind " + std::to_string(static_cast<int>(request.kind())) +
-                   " (known: 0 magnetometer, 1 gyro bias, 2 accelerometer)");
+                   " (known: 0 magnetometer, 1 gyro bias, 2 accelerometer, 3 segment alignment)");
+    return;
+  }
+  if (*kind == calib::CalibrationKind::alignment) {
+    on_alignment_request(request, now);
     return;
   }
   calib::SessionParams params;
@@ -279,6 +361,13 @@ void CalibrationService::on_raw(const bsn::RawSample& raw) {
   if (b == busy_.end()) return;
   const std::string request_id = b->second;  // a copy: finish() erases the entry
   Run& run = runs_.at(request_id);
+  if (run.alignment) {
+    const auto& nodes = run.alignment->nodes();
+    for (std::size_t i = 0; i < nodes.size(); ++i)
+      if (nodes[i].node == raw.node_id()) run.alignment->add(i, to_session_sample(raw), now);
+    if (run.alignment->collection_over(now)) finish(request_id, now);
+    return;
+  }
   bool all_over = true;
   for (NodeRun& n : run.nodes) {
     if (n.node == raw.node_id()) n.session.add(to_session_sample(raw), now);
@@ -294,14 +383,20 @@ void CalibrationService::tick() {
   std::vector<std::string> over;
   for (auto& [id, run] : runs_) {
     if (seconds_between(run.last_progress_ns, now) >= options_.progress_period_s) publish_progress(run, now);
-    const bool all_over = std::all_of(run.nodes.begin(), run.nodes.end(),
-                                      [now](const NodeRun& n) { return n.session.collection_over(now); });
+    const bool all_over = run.alignment ? run.alignment->collection_over(now)
+                                        : std::all_of(run.nodes.begin(), run.nodes.end(), [now](const NodeRun& n) {
+                                            return n.session.collection_over(now);
+                                          });
     if (all_over) over.push_back(id);
   }
   for (const std::string& id : over) finish(id, now);
 }
 
 void CalibrationService::publish_progress(Run& run, std::uint64_t now) {
+  if (run.alignment) {
+    publish_alignment_progress(run, now);
+    return;
+  }
   bsn::CalibrationProgress p;
   p.request_id(run.id);
   bool started = false;
@@ -357,6 +452,10 @@ void CalibrationService::finish(const std::string& request_id, std::uint64_t now
   if (it == runs_.end()) return;
   Run run = std::move(it->second);
   runs_.erase(it);
+  if (run.alignment) {
+    finish_alignment(run, now, abort_reason);
+    return;
+  }
   std::vector<std::pair<const NodeRun*, calib::SessionResult>> to_store;
   for (const NodeRun& n : run.nodes) {
     busy_.erase(n.node);
@@ -398,6 +497,157 @@ void CalibrationService::finish(const std::string& request_id, std::uint64_t now
       // The fit is good and in effect; only its persistence failed: say so on the result too.
       logging::log_error("request '", run.id, "': node '", n->node, "': ", e.what());
       bsn::CalibrationResult& m = last_success_[{n->node, static_cast<int>(run.kind)}];
+      m.message(std::string("not stored: ") + e.what());
+      result_writer_->write(m);
+    }
+  }
+}
+
+void CalibrationService::refuse_alignment(const std::string& request_id, const std::vector<std::string>& nodes,
+                                          const std::string& why) {
+  refuse(request_id, why);
+  // The result topic says it too, per node named (at most a body's worth: the refusal is on progress anyway).
+  std::size_t written = 0;
+  for (const std::string& node : nodes) {
+    if (node.empty() || node.size() > kMaxNodeIdLength || ++written > 64) continue;
+    result_writer_->write(alignment_message(node, request_id, {}, false, "refused: " + why));
+    if (const auto good = last_success_.find({node, static_cast<int>(calib::CalibrationKind::alignment)});
+        good != last_success_.end())
+      result_writer_->write(good->second);
+  }
+}
+
+void CalibrationService::on_alignment_request(const bsn::CalibrationRequest& request, std::uint64_t now) {
+  const std::string& id = request.request_id();
+  const std::vector<std::string> named = request.node_id() == "*" || request.node_id().empty()
+                                             ? std::vector<std::string>{}
+                                             : split_nodes(request.node_id());
+  fusion::BodyModel body;
+  try {
+    body = request.body().empty() ? fusion::default_lower_body() : config::parse_body_model(request.body(), "body");
+  } catch (const config::ConfigError& e) {
+    refuse_alignment(id, named, std::string("the request's body does not parse: ") + e.what());
+    return;
+  }
+  for (const std::string& node : named) {
+    if (node.size() > kMaxNodeIdLength) {
+      refuse_alignment(id, {}, "node id '" + node.substr(0, 20) + "...' is longer than 63 characters");
+      return;
+    }
+  }
+  std::string problem;
+  std::vector<calib::AlignmentNode> nodes = alignment_nodes(body, named, problem);
+  if (!problem.empty()) {
+    refuse_alignment(id, named, problem);
+    return;
+  }
+  calib::AlignmentSessionParams params;
+  params.duration_s = request.duration_s();
+  if (request.pose_s() != 0.0) params.pose_s = request.pose_s();
+  params.until_good = request.until_good();
+  std::vector<std::string> ids;
+  for (const auto& n : nodes) ids.push_back(n.node);
+  if (const std::string why = calib::validate(params); !why.empty()) {
+    refuse_alignment(id, ids, why);
+    return;
+  }
+  for (const std::string& node : ids) {
+    if (const auto b = busy_.find(node); b != busy_.end()) {
+      refuse_alignment(id, ids,
+                       "node '" + node + "' is being calibrated by request '" + b->second + "'; wait for its result");
+      return;
+    }
+  }
+  Run run;
+  run.id = id;
+  run.kind = calib::CalibrationKind::alignment;
+  run.start_ns = now;
+  run.alignment = std::make_unique<calib::AlignmentSession>(std::move(nodes), params, now);
+  std::string list;
+  for (const std::string& node : ids) {
+    busy_[node] = id;
+    list += (list.empty() ? "" : ", ") + node;
+  }
+  logging::log_info("request '", id, "': alignment of ", list, " (", params.duration_s, " s, N-pose ", params.pose_s,
+                    " s", params.until_good ? ", until good enough" : "", ")");
+  auto& stored = runs_[id] = std::move(run);
+  publish_progress(stored, now);
+}
+
+void CalibrationService::publish_alignment_progress(Run& run, std::uint64_t now) {
+  const calib::AlignmentProgress a = run.alignment->progress(now);
+  bsn::CalibrationProgress p;
+  p.request_id(run.id);
+  p.phase(a.phase == calib::AlignmentPhase::waiting ? bsn::CALIBRATION_PHASE_WAITING
+                                                    : bsn::CALIBRATION_PHASE_COLLECTING);
+  p.elapsed_s(a.elapsed_s);
+  p.seconds_left(a.seconds_left);
+  p.fraction(a.fraction);
+  p.instruction(a.instruction);
+  const auto& nodes = run.alignment->nodes();
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
+    np.node_id(nodes[i].node);
+    np.samples(static_cast<std::uint32_t>(a.samples[i]));
+    np.instruction(a.node_instructions[i]);
+  }
+  progress_writer_->write(p);
+  run.last_progress_ns = now;
+}
+
+void CalibrationService::finish_alignment(Run& run, std::uint64_t now, const std::string& abort_reason) {
+  const auto& nodes = run.alignment->nodes();
+  for (const auto& n : nodes) busy_.erase(n.node);
+  calib::AlignmentSessionResult r;
+  if (abort_reason.empty()) {
+    r = run.alignment->finish(now);
+  } else {
+    r.nodes.resize(nodes.size());
+    for (auto& n : r.nodes) n.message = abort_reason;
+  }
+  std::vector<std::pair<std::string, config::AlignmentRecord>> to_store;
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    const calib::NodeAlignment& a = r.nodes[i];
+    config::AlignmentRecord record{nodes[i].segment,    a.sensor_to_segment,  a.source,
+                                   a.relative_residual, a.axis_observability, run.alignment->samples(i)};
+    // A failure of the whole body (a silent node, no pose, another clock) says so; a segment's own names the node.
+    const std::string message = a.success ? ""
+                                : !r.problem.empty() && a.message == r.problem
+                                    ? "the body's alignment failed: " + a.message
+                                    : "node '" + nodes[i].node + "': " + a.message;
+    if (!a.success) logging::log_warn("request '", run.id, "': ", message);
+    const bsn::CalibrationResult m = alignment_message(nodes[i].node, run.id, record, a.success, message);
+    result_writer_->write(m);
+    const std::pair<std::string, int> key{nodes[i].node, static_cast<int>(calib::CalibrationKind::alignment)};
+    if (a.success) {
+      last_success_[key] = m;
+      to_store.emplace_back(nodes[i].node, record);
+    } else if (const auto good = last_success_.find(key); good != last_success_.end()) {
+      result_writer_->write(good->second);
+    }
+  }
+  bsn::CalibrationProgress p;
+  p.request_id(run.id);
+  p.phase(bsn::CALIBRATION_PHASE_DONE);
+  p.elapsed_s(seconds_between(run.start_ns, now));
+  p.fraction(1.0);
+  p.instruction("done: " + std::to_string(to_store.size()) + " of " + std::to_string(nodes.size()) + " nodes aligned" +
+                (r.problem.empty() ? "" : " (" + r.problem + ")"));
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
+    np.node_id(nodes[i].node);
+    np.samples(static_cast<std::uint32_t>(run.alignment->samples(i)));
+    np.instruction(r.nodes[i].success ? r.nodes[i].source : r.nodes[i].message);
+  }
+  progress_writer_->write(p);
+  for (const auto& [node, record] : to_store) {
+    try {
+      const std::string path = store_.save_alignment(node, record, run.id);
+      logging::log_info("request '", run.id, "': node '", node, "' aligned to segment '", record.segment, "' (",
+                        record.source, "); stored in ", path);
+    } catch (const std::exception& e) {
+      logging::log_error("request '", run.id, "': node '", node, "': ", e.what());
+      bsn::CalibrationResult& m = last_success_[{node, static_cast<int>(calib::CalibrationKind::alignment)}];
       m.message(std::string("not stored: ") + e.what());
       result_writer_->write(m);
     }

@@ -13,8 +13,10 @@
 #include <unordered_map>
 #include <vector>
 
+#include "bsn/calib/alignment_session.hpp"
 #include "bsn/calib/calibration_session.hpp"
 #include "bsn/dds/participant.hpp"
+#include "bsn/fusion/body_model.hpp"
 #include "calibration_store.hpp"
 #include "command.hpp"
 
@@ -51,10 +53,17 @@ class CalibrationService {
     calib::CalibrationKind kind;
     std::uint64_t start_ns = 0;
     std::uint64_t last_progress_ns = 0;
-    std::vector<NodeRun> nodes;
+    std::vector<NodeRun> nodes;  ///< the sensor kinds: one session per node
+    /// The alignment: one session for the body's nodes together (`nodes` stays empty).
+    std::unique_ptr<calib::AlignmentSession> alignment;
   };
 
   void on_request(const bsn::CalibrationRequest& request);
+  void on_alignment_request(const bsn::CalibrationRequest& request, std::uint64_t now_ns);
+  /// Refuses an alignment request on the progress topic and fails each of `nodes` on the result topic.
+  void refuse_alignment(const std::string& request_id, const std::vector<std::string>& nodes, const std::string& why);
+  void finish_alignment(Run& run, std::uint64_t now_ns, const std::string& abort_reason);
+  void publish_alignment_progress(Run& run, std::uint64_t now_ns);
   void on_raw(const bsn::RawSample& raw);
   void refuse(const std::string& request_id, const std::string& why);
   void publish_refusal(const std::string& request_id, const std::string& why);
@@ -80,6 +89,12 @@ class CalibrationService {
   std::unique_ptr<dds::Reader<bsn::RawSample>> raw_reader_;
   std::unique_ptr<dds::Reader<bsn::CalibrationRequest>> request_reader_;
 };
+
+/// The alignment's nodes of `body`: those named in `wanted` (every node of the body when empty), parents before
+/// children; `flexion_sign` from the joint's type (knee -1, hip and ankle +1, others 0). On a node of no segment
+/// `problem` says so and the result is empty.
+std::vector<calib::AlignmentNode> alignment_nodes(const fusion::BodyModel& body, const std::vector<std::string>& wanted,
+                                                  std::string& problem);
 
 /// The wire kind of a core kind and back (nullopt for a value outside the enum, e.g. from another vendor).
 bsn::CalibrationKind to_wire(calib::CalibrationKind kind);

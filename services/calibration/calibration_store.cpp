@@ -117,7 +117,23 @@ std::string CalibrationStore::save(const std::string& node, const calib::Session
     case calib::CalibrationKind::gyro_bias:
       text += config::calibration_to_yaml(node, nullptr, nullptr, &result.gyro, request_id);
       break;
+    case calib::CalibrationKind::alignment:
+      throw std::logic_error("an alignment is stored with save_alignment()");
   }
+  return replace_file(path, text);
+}
+
+std::string CalibrationStore::save_alignment(const std::string& node, const config::AlignmentRecord& alignment,
+                                             const std::string& request_id) {
+  const std::string path = path_of(node, calib::CalibrationKind::alignment);
+  const std::string text = "# bsn calibration service: alignment of node '" + node + "' (segment '" +
+                           alignment.segment + "'), request '" + request_id + "', " + utc_now() +
+                           ". v_segment = sensor_to_segment * v_sensor\n" +
+                           config::alignment_to_yaml(node, alignment, request_id);
+  return replace_file(path, text);
+}
+
+std::string CalibrationStore::replace_file(const std::string& path, const std::string& text) {
   const std::string temporary = path + kTemporaryMark + std::to_string(::getpid());
   try {
     write_durably(temporary, text);
@@ -178,6 +194,7 @@ std::vector<StoredCalibration> CalibrationStore::load_all(std::vector<std::strin
     if (doc.calibration.magnetometer) add(calib::CalibrationKind::magnetometer);
     if (doc.calibration.accelerometer) add(calib::CalibrationKind::accelerometer);
     if (doc.calibration.gyroscope) add(calib::CalibrationKind::gyro_bias);
+    if (doc.alignment) add(calib::CalibrationKind::alignment);
   }
   return out;
 }

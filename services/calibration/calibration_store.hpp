@@ -31,6 +31,9 @@ class CalibrationStore {
   /// Writes a successful result; returns the file's path. Throws std::runtime_error on an I/O failure (then
   /// the previous file is still in place and no temporary file is left).
   std::string save(const std::string& node, const calib::SessionResult& result, const std::string& request_id);
+  /// Writes a node's alignment (kind alignment) the same way; returns the file's path. Throws as save().
+  std::string save_alignment(const std::string& node, const config::AlignmentRecord& alignment,
+                             const std::string& request_id);
 
   /// Every readable stored calibration (one entry per channel a file holds). A file that does not parse, or
   /// whose node disagrees with its name, is skipped and its "FILE:LINE: problem" added to `problems`. Leftover
@@ -41,6 +44,9 @@ class CalibrationStore {
   std::string path_of(const std::string& node, calib::CalibrationKind kind) const;
 
  private:
+  /// Replaces `path` by `text` atomically, keeping the old file as <path>.previous.
+  std::string replace_file(const std::string& path, const std::string& text);
+
   std::string dir_;
 };
 

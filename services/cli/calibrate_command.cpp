@@ -8,11 +8,13 @@
 
 #include "bsn/calib/allan.hpp"
 #include "bsn/calib/pose_segmentation.hpp"
+#include "bsn/config/body_config.hpp"
 #include "bsn/config/calibration_file.hpp"
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/io/json.hpp"
 #include "bsn/io/recording.hpp"
 #include "calibration_client.hpp"
+#include "calibration_service.hpp"
 #include "tools.hpp"
 
 namespace bsn::services {
@@ -31,6 +33,7 @@ struct CalibrateOptions {
   double min_pose_s = 1.0;        ///< shortest rest that counts as a pose, s
   std::string plot;               ///< with --allan: write the curves as an SVG here
   bool live = false;              ///< calibrate through the calibration service instead
+  std::string alignment;          ///< a folder of per-node recordings to align (<node>.hdf5) instead
   bool field_magnitude_given = false;
   LiveCalibrationOptions live_options;
 };
@@ -357,6 +360,102 @@ int run_allan(const CalibrateOptions& opt) {
   return 0;
 }
 
+/// `--alignment DIR`: the alignment of a recorded lab procedure (N-pose, flexions) from DIR/<node>.hdf5 per node of
+/// the body, as the calibration service would align it live; writes DIR/<node>.alignment.calib.yaml (or --output).
+int run_offline_alignment(const CalibrateOptions& opt) {
+  namespace fs = std::filesystem;
+  fusion::BodyModel body;
+  try {
+    body = opt.live_options.body_path.empty() ? fusion::default_lower_body()
+                                              : config::load_body_model(opt.live_options.body_path);
+  } catch (const config::ConfigError& e) {
+    std::fprintf(stderr, "bsn calibrate: error: %s\n", e.what());
+    return 2;
+  }
+  std::string problem;
+  std::vector<calib::AlignmentNode> nodes = alignment_nodes(body, {}, problem);
+  std::vector<io::Recording> recordings;
+  for (const calib::AlignmentNode& n : nodes) {
+    const std::string path = (fs::path(opt.alignment) / (n.node + ".hdf5")).string();
+    if (!fs::exists(path)) {
+      std::fprintf(stderr,
+                   "bsn calibrate: --alignment: %s is missing: the alignment needs a recording of every node of the "
+                   "body (bsn export SESSION.h5 --format broad --out DIR writes DIR/<node>.hdf5; --body for another "
+                   "body)\n",
+                   path.c_str());
+      return 2;
+    }
+    try {
+      recordings.push_back(io::read_recording(path));
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "bsn calibrate: error: %s\n", e.what());
+      return 2;
+    }
+  }
+  // The samples in time order across the nodes, arriving at their sensor time, as a live collection sees them.
+  struct Arrival {
+    std::uint64_t t;
+    std::size_t node, index;
+  };
+  std::vector<Arrival> arrivals;
+  for (std::size_t i = 0; i < recordings.size(); ++i)
+    for (std::size_t k = 0; k < recordings[i].size(); ++k) arrivals.push_back({recordings[i].time_ns(k), i, k});
+  std::sort(arrivals.begin(), arrivals.end(), [](const Arrival& a, const Arrival& b) { return a.t < b.t; });
+  if (arrivals.empty()) {
+    std::fprintf(stderr, "bsn calibrate: --alignment: the recordings hold no sample\n");
+    return 2;
+  }
+  calib::AlignmentSessionParams params;
+  const double span_s = static_cast<double>(arrivals.back().t - arrivals.front().t) * 1e-9;
+  params.max_duration_s = std::max(params.max_duration_s, span_s + 10.0);
+  params.max_samples = std::max(params.max_samples, arrivals.size());
+  params.duration_s = span_s + 5.0;
+  if (opt.live_options.pose_s > 0.0) params.pose_s = opt.live_options.pose_s;
+  if (const std::string why = calib::validate(params); !why.empty()) {
+    std::fprintf(stderr, "bsn calibrate: --alignment: %s\n", why.c_str());
+    return 2;
+  }
+  calib::AlignmentSession session(nodes, params, arrivals.front().t);
+  for (const Arrival& a : arrivals) {
+    const fusion::ImuSample x = recordings[a.node].sample(a.index);
+    calib::SessionSample s;
+    s.seq = a.index;
+    s.timestamp_ns = a.t;
+    s.acc = x.acc;
+    s.gyr = x.gyr;
+    s.mag = x.mag;
+    s.has_acc = x.has_acc;
+    s.has_gyr = x.has_gyr;
+    s.has_mag = x.has_mag;
+    session.add(a.node, s, a.t);
+  }
+  const calib::AlignmentSessionResult r = session.finish(arrivals.back().t);
+  const std::string out_dir = opt.output.empty() ? opt.alignment : opt.output;
+  std::error_code ec;
+  fs::create_directories(out_dir, ec);
+  std::size_t aligned = 0;
+  if (r.problem.empty())
+    std::printf("N-pose %.1f .. %.1f s, flexions to %.1f s\n", r.pose_start_s, r.pose_end_s, r.moves_end_s);
+  for (std::size_t i = 0; i < nodes.size(); ++i) {
+    const calib::NodeAlignment& a = r.nodes[i];
+    if (!a.success) {
+      std::printf("%s: alignment FAILED: %s\n", nodes[i].node.c_str(), a.message.c_str());
+      continue;
+    }
+    const config::AlignmentRecord record{nodes[i].segment,    a.sensor_to_segment,  a.source,
+                                         a.relative_residual, a.axis_observability, a.samples};
+    const std::string path = (fs::path(out_dir) / (nodes[i].node + ".alignment.calib.yaml")).string();
+    std::ofstream(path) << config::alignment_to_yaml(nodes[i].node, record);
+    const calib::Quat& q = a.sensor_to_segment;
+    std::printf("%s: aligned to segment %s (%s", nodes[i].node.c_str(), nodes[i].segment.c_str(), a.source.c_str());
+    if (a.axis_observability > 0.0)
+      std::printf(", hinge residual %.3f, axis observability %.3f", a.relative_residual, a.axis_observability);
+    std::printf(")\n  sensor_to_segment = [%.6f, %.6f, %.6f, %.6f] -> %s\n", q.w(), q.x(), q.y(), q.z(), path.c_str());
+    ++aligned;
+  }
+  return aligned == nodes.size() ? 0 : 1;
+}
+
 /// Runs the command; returns the process exit code (0 ok, 1 the data do not calibrate, 2 unreadable input).
 int run_calibrate(const CalibrateOptions& options) {
   if (options.live) {
@@ -369,8 +468,15 @@ int run_calibrate(const CalibrateOptions& options) {
     if (options.field_magnitude_given) live.field_magnitude = options.field_magnitude;
     return run_live_calibration(live);
   }
+  if (!options.alignment.empty()) {
+    if (!options.input.empty() || !options.allan.empty()) {
+      std::fprintf(stderr, "bsn calibrate: --alignment takes no --input or --allan\n");
+      return 2;
+    }
+    return run_offline_alignment(options);
+  }
   if (options.input.empty() == options.allan.empty()) {
-    std::fprintf(stderr, "bsn calibrate: give exactly one of --input FILE or --allan FILE\n");
+    std::fprintf(stderr, "bsn calibrate: give exactly one of --input FILE, --allan FILE or --alignment DIR\n");
     return 2;
   }
   return options.allan.empty() ? run_fit(options) : run_allan(options);
@@ -384,12 +490,16 @@ Command calibrate_command() {
             auto opt = std::make_shared<CalibrateOptions>();
             cmd->add_option("--input", opt->input, "recording (CSV, BROAD HDF5) of still poses turned by hand");
             cmd->add_option("--allan", opt->allan, "static recording: print Allan noise figures instead");
+            cmd->add_option("--alignment", opt->alignment,
+                            "folder of a recorded alignment (N-pose, flexions), DIR/<node>.hdf5 per node of the body: "
+                            "write DIR/<node>.alignment.calib.yaml (or into --output DIR) instead");
             auto* field = cmd->add_option("--field-magnitude", opt->field_magnitude,
                                           "|calibrated magnetometer|, M (with --live: uT, default 50)")
                               ->capture_default_str()
                               ->check(positive_number(1e6));
             cmd->add_flag("--json", opt->json, "print the magnetometer calibration as one JSON object");
-            cmd->add_option("--output", opt->output, "calibration file to write (default: INPUT.calib.yaml)");
+            cmd->add_option("--output", opt->output,
+                            "calibration file to write (default: INPUT.calib.yaml); with --alignment: the folder");
             cmd->add_option("--node", opt->node,
                             "node id to record in the calibration file; with --live: the node (or ID,ID,...) to "
                             "calibrate");
@@ -404,8 +514,17 @@ Command calibrate_command() {
             cmd->add_option("--plot", opt->plot, "with --allan: write the Allan curves as SVG");
             LiveCalibrationOptions& live = opt->live_options;
             cmd->add_flag("--live", opt->live, "calibrate live through `bsn calibration` (see --node, --kind)");
-            cmd->add_option("--kind", live.kind, "with --live: magnetometer, gyro-bias or accelerometer")
+            cmd->add_option("--kind", live.kind,
+                            "with --live: magnetometer, gyro-bias, accelerometer or alignment (sensor-to-segment "
+                            "rotations of a body's nodes: N-pose, then flexions)")
                 ->capture_default_str();
+            cmd->add_option("--body", live.body_path,
+                            "with --alignment, or --live --kind alignment: the body model whose nodes are aligned "
+                            "(default: the 7-segment lower body; with --live, --node picks some of its nodes)");
+            cmd->add_option(
+                   "--pose", live.pose_s,
+                   "with --live --kind alignment: the N-pose at the start lasts at least S seconds (default 3)")
+                ->check(non_negative_number(60.0));
             cmd->add_flag("--all-nodes", live.all_nodes, "with --live: every node publishing on bsn/raw");
             cmd->add_option("--duration", live.duration_s, "with --live: collect for S seconds (0: --samples only)")
                 ->capture_default_str();

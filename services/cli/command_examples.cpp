@@ -52,7 +52,10 @@ const std::map<std::string, std::string>& examples() {
        "  bsn calibrate --input turns/imu.hdf5 --field-magnitude 50 --node thigh_l   writes turns/imu.calib.yaml\n"
        "  bsn calibrate --allan still/imu.hdf5 --plot allan.svg   (still/: the allan_static_30min.yaml scenario)\n"
        "  bsn calibrate --live --node thigh_l --until-good        through a running `bsn calibration`\n"
-       "Kinds with --live: magnetometer, gyro-bias, accelerometer."},
+       "  bsn calibrate --live --kind alignment --until-good       every node of the body: N-pose, then flexions\n"
+       "  bsn calibrate --alignment lab/     (lab/: the gait_alignment.yaml scenario) writes "
+       "lab/<node>.alignment.calib.yaml\n"
+       "Kinds with --live: magnetometer, gyro-bias, accelerometer, alignment."},
       {"calibration",
        "  bsn calibration                            serve requests for every node, store in ~/.local/state/bsn\n"
        "  bsn calibration --store /var/lib/bsn/calibration --domain 12"},

@@ -33,6 +33,8 @@ const char* kind_name(bsn::CalibrationKind k) {
       return "gyro_bias";
     case bsn::CALIBRATION_ACCELEROMETER:
       return "accelerometer";
+    case bsn::CALIBRATION_SEGMENT_ALIGNMENT:
+      return "alignment";
   }
   return "unknown";
 }
@@ -133,10 +135,24 @@ std::string format_sample(const bsn::Status& s) {
 
 std::string format_sample(const bsn::CalibrationRequest& s) {
   return "calibration_request " + text(s.request_id()) + " node=" + text(s.node_id()) + " kind=" + kind_name(s.kind()) +
-         printf_string(" duration=%.1fs samples=%u", s.duration_s(), s.sample_count());
+         printf_string(" duration=%.1fs samples=%u", s.duration_s(), s.sample_count()) +
+         (s.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT
+              ? printf_string(" pose=%.1fs body=%s", s.pose_s(),
+                              s.body().empty() ? "default" : printf_string("%zu-bytes", s.body().size()).c_str())
+              : std::string());
 }
 
 std::string format_sample(const bsn::CalibrationResult& s) {
+  if (s.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT) {
+    const auto& q = s.sensor_to_segment();
+    return "calibration_result " + text(s.node_id()) + " request=" + text(s.request_id()) + " kind=alignment" +
+           (s.success() ? " ok" : " FAILED") + " segment=" + text(s.segment()) +
+           printf_string(" sensor_to_segment=[%.5f %.5f %.5f %.5f]", q[0], q[1], q[2], q[3]) + " source=\"" +
+           text(s.alignment_source()) + "\"" +
+           printf_string(" hinge_residual=%.4f observability=%.4f samples=%u", s.hinge_residual(),
+                         s.axis_observability(), s.sample_count()) +
+           (s.message().empty() ? "" : " message=\"" + logging::printable(s.message(), 400) + "\"");
+  }
   const auto& h = s.transform();
   return "calibration_result " + text(s.node_id()) + " request=" + text(s.request_id()) +
          " kind=" + kind_name(s.kind()) + (s.success() ? " ok" : " FAILED") + " bias=" + vec3(s.bias()) +

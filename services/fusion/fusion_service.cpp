@@ -70,6 +70,10 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
 
 void FusionService::on_calibration(const bsn::CalibrationResult& r) {
   if (!r.success()) return;  // a failed calibration changes nothing; the service republishes the one in effect
+  if (r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT) {
+    on_alignment(r);
+    return;
+  }
   const char* channel = r.kind() == bsn::CALIBRATION_MAGNETOMETER    ? "magnetometer"
                         : r.kind() == bsn::CALIBRATION_GYRO_BIAS     ? "gyroscope"
                         : r.kind() == bsn::CALIBRATION_ACCELEROMETER ? "accelerometer"
@@ -102,6 +106,36 @@ void FusionService::on_calibration(const bsn::CalibrationResult& r) {
   logging::log_info("node '", spec.node, "' (", spec.name, "): ", channel, " calibration '", r.request_id(),
                     "' applied from its next sample on; its filter restarts");
   status_due_ = true;
+}
+
+void FusionService::on_alignment(const bsn::CalibrationResult& r) {
+  const auto& w = r.sensor_to_segment();
+  const Eigen::Vector4d v(w[0], w[1], w[2], w[3]);
+  std::lock_guard lock(mutex_);
+  const auto segment = fusion_.segment_of(r.node_id());
+  if (!segment) return;  // a node of another body
+  const fusion::SegmentSpec& spec = fusion_.body().segments[*segment];
+  if (!v.allFinite() || !(std::abs(v.norm() - 1.0) < 1e-3)) {
+    logging::log_warn("alignment '", logging::printable(r.request_id()), "' for node '", spec.node,
+                      "' refused: sensor_to_segment is not a finite unit quaternion");
+    return;
+  }
+  // An alignment fitted with the node on another segment (another body file) would turn it into the wrong frame.
+  if (r.segment() != spec.name) {
+    logging::log_warn("alignment '", logging::printable(r.request_id()), "' for node '", spec.node,
+                      "' was fitted for segment '", logging::printable(r.segment()),
+                      "', but this body has the node on '", spec.name, "'; not applied");
+    return;
+  }
+  std::string& applied = applied_calibration_[{*segment, static_cast<int>(r.kind())}];
+  if (applied == r.request_id()) return;
+  fusion_.update_alignment(r.node_id(), fusion::Quat(v[0], v[1], v[2], v[3]).normalized());
+  applied = r.request_id();
+  calibration_id_[*segment] = last_calibration_id_ = r.request_id();
+  logging::log_info("node '", spec.node, "' (", spec.name, "): alignment '", r.request_id(), "' (",
+                    logging::printable(r.alignment_source()),
+                    ") applied from its next sample on: bsn/orientation reports the segment frame");
+  publish_status(dds::monotonic_ns());
 }
 
 void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer) {
@@ -301,6 +335,7 @@ int run_fusion(const FusionCommandOptions& opt) {
   try {
     body = opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
     service_options.calibrations = config::load_body_calibrations(opt.body_path);
+    config::apply_body_alignments(opt.body_path, body);
   } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "bsn fusion: error: %s\n", e.what());
     return 2;

@@ -36,6 +36,7 @@ class FusionService {
   void on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer);  ///< called from the DDS thread
   void log_source_events(const fusion::SampleResult& r, std::uint64_t now_ns);
   void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
+  void on_alignment(const bsn::CalibrationResult& result);    ///< a successful alignment, from on_calibration
   void on_status(const bsn::Status& status);  ///< another process's status (DDS thread): a second fusion?
   void fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);  ///< into orientation_msg_
   void fill_joint(const fusion::JointEstimate& j, std::uint64_t timestamp_ns);       ///< into joint_msg_

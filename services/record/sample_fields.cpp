@@ -82,6 +82,8 @@ void visit_fields(const bsn::CalibrationRequest& s, FieldVisitor& v) {
   v.u32("kind", "enum", static_cast<std::uint32_t>(s.kind()));
   scalar(v, "duration_s", "s", s.duration_s());
   v.u32("sample_count", "", s.sample_count());
+  v.text("body", s.body());
+  scalar(v, "pose_s", "s", s.pose_s());
 }
 
 void visit_fields(const bsn::CalibrationResult& s, FieldVisitor& v) {
@@ -97,6 +99,11 @@ void visit_fields(const bsn::CalibrationResult& s, FieldVisitor& v) {
   scalar(v, "condition_number", "", s.condition_number());
   v.u32("pose_count", "", s.pose_count());
   v.text("message", s.message());
+  v.text("segment", s.segment());
+  v.f64("sensor_to_segment", "", s.sensor_to_segment().data(), 4);
+  v.text("alignment_source", s.alignment_source());
+  scalar(v, "hinge_residual", "", s.hinge_residual());
+  scalar(v, "axis_observability", "", s.axis_observability());
 }
 
 std::string component_name(const char* name, int n, int i) {

@@ -48,7 +48,7 @@ TEST_F(DemoCommand, Demo) {
   const auto st = demo.wait_for(1s);
   ASSERT_TRUE(st.has_value()) << "bsn demo --duration 20 still runs after 60 s";
   EXPECT_TRUE(exited_cleanly(st)) << "bsn demo " << describe_status(st);
-  EXPECT_EQ(most_children, 8u) << "child processes of the demo seen at once (fusion + 7 sims)";
+  EXPECT_EQ(most_children, 9u) << "child processes of the demo seen at once (fusion, calibration + 7 sims)";
   EXPECT_TRUE(shm_used.empty()) << "the demo's processes used shared memory: " << ::testing::PrintToString(shm_used);
 
   const std::string out = read_file(log_path("demo"));
@@ -62,9 +62,14 @@ TEST_F(DemoCommand, Demo) {
   EXPECT_TRUE(std::regex_search(
       out, std::regex(R"(\n(hip|knee|ankle)_[lr] +(flexion_extension|dorsiflexion_plantarflexion) +-?\d+\.\d\d)")))
       << "no joint-angle line in the demo's output";
-  // The walking body's first angles in the ranges of normal gait (knee 0..65, hip -20..35, ankle -20..15 deg), with
-  // 5 deg for the filters' largest momentary errors, and within 3 deg rms of the simulator's truth (the issue's
-  // bound; the filters reach 1-2 deg on this motion).
+  // The live alignment through the calibration service: every node aligned, the joints then in the segment frames.
+  EXPECT_TRUE(std::regex_search(out, std::regex(R"(bsn demo: alignment: 7 of 7 nodes aligned)")))
+      << "no successful alignment in the demo's output";
+  EXPECT_TRUE(std::regex_search(out, std::regex(R"(\n(hip|knee|ankle)_[lr] .* aligned )")))
+      << "no joint shown with the aligned mounting";
+  // After the alignment, while walking, the walking body's first angles in the ranges of normal gait (knee 0..65, hip
+  // -20..35, ankle -20..15 deg), with 5 deg for the filters' largest momentary errors, and within 3 deg rms of the
+  // simulator's truth (the issue's bound; the filters reach 1-2 deg on this motion).
   const std::map<std::string, std::pair<double, double>> ranges{
       {"hip", {-20, 35}}, {"knee", {0, 65}}, {"ankle", {-20, 15}}};
   const std::regex joint_summary(

@@ -36,6 +36,27 @@ calib::ChannelCalibration channel(const Reader& r, const YAML::Node& n, const st
   return c;
 }
 
+AlignmentRecord alignment(const Reader& r, const YAML::Node& n) {
+  r.check_keys(n, {"segment", "sensor_to_segment", "source", "hinge_residual", "axis_observability", "samples"},
+               "alignment");
+  AlignmentRecord a;
+  const YAML::Node segment = n["segment"];
+  if (!segment || !segment.IsScalar() || segment.as<std::string>().empty())
+    r.fail(n, "alignment needs segment: the segment it was fitted for");
+  a.segment = segment.as<std::string>();
+  const YAML::Node q = n["sensor_to_segment"];
+  if (!q || !q.IsSequence() || q.size() != 4) r.fail(q ? q : n, "alignment needs sensor_to_segment: [w, x, y, z]");
+  const Eigen::Vector4d v(r.number(q[0], "sensor_to_segment"), r.number(q[1], "sensor_to_segment"),
+                          r.number(q[2], "sensor_to_segment"), r.number(q[3], "sensor_to_segment"));
+  if (!(std::abs(v.norm() - 1.0) < 1e-3)) r.fail(q, "sensor_to_segment must be a unit quaternion [w, x, y, z]");
+  a.sensor_to_segment = calib::Quat(v[0], v[1], v[2], v[3]).normalized();
+  if (const YAML::Node x = n["source"]) a.source = x.as<std::string>();
+  if (n["hinge_residual"]) a.hinge_residual = r.number(n["hinge_residual"], "hinge_residual");
+  if (n["axis_observability"]) a.axis_observability = r.number(n["axis_observability"], "axis_observability");
+  if (n["samples"]) a.samples = static_cast<std::size_t>(std::max(0.0, r.number(n["samples"], "samples")));
+  return a;
+}
+
 }  // namespace
 
 CalibrationDocument parse_calibration_document(const std::string& yaml_text, const std::string& source) {
@@ -50,7 +71,8 @@ CalibrationDocument parse_calibration_document(const std::string& yaml_text, con
   CalibrationDocument doc;
   calib::SensorCalibration& out = doc.calibration;
   try {
-    reader.check_keys(root, {"node", "request_id", "magnetometer", "accelerometer", "gyroscope", "quality"},
+    reader.check_keys(root,
+                      {"node", "request_id", "magnetometer", "accelerometer", "gyroscope", "quality", "alignment"},
                       "the calibration file");
     if (const YAML::Node n = root["node"]) {
       if (!n.IsScalar()) reader.fail(n, "node must be a node id");
@@ -73,10 +95,12 @@ CalibrationDocument parse_calibration_document(const std::string& yaml_text, con
         doc.accelerometer_field_magnitude = reader.number(a["field_magnitude"], "field_magnitude");
     }
     if (root["gyroscope"]) out.gyroscope = channel(reader, root["gyroscope"], "gyroscope");
+    if (root["alignment"]) doc.alignment = alignment(reader, root["alignment"]);
   } catch (const YAML::Exception& e) {
     reader.fail_at(e.mark.line + 1, e.msg);
   }
-  if (out.empty()) reader.fail(root, "the calibration file holds no magnetometer, accelerometer or gyroscope");
+  if (out.empty() && !doc.alignment)
+    reader.fail(root, "the calibration file holds no magnetometer, accelerometer, gyroscope or alignment");
   return doc;
 }
 
@@ -148,16 +172,38 @@ std::string calibration_to_yaml(const std::string& node, const calib::FieldCalib
   return std::string(out.c_str()) + "\n";
 }
 
-std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations(const std::string& body_path) {
-  std::unordered_map<std::string, calib::SensorCalibration> out;
-  if (body_path.empty()) return out;
+std::string alignment_to_yaml(const std::string& node, const AlignmentRecord& a, const std::string& request_id) {
+  YAML::Emitter out;
+  out.SetDoublePrecision(12);
+  out << YAML::BeginMap;
+  if (!node.empty()) out << YAML::Key << "node" << YAML::Value << node;
+  if (!request_id.empty()) out << YAML::Key << "request_id" << YAML::Value << request_id;
+  out << YAML::Key << "alignment" << YAML::Value << YAML::BeginMap;
+  out << YAML::Key << "segment" << YAML::Value << a.segment;
+  const calib::Quat& q = a.sensor_to_segment;
+  out << YAML::Key << "sensor_to_segment" << YAML::Value << YAML::Flow << YAML::BeginSeq << q.w() << q.x() << q.y()
+      << q.z() << YAML::EndSeq;
+  out << YAML::Key << "source" << YAML::Value << a.source;
+  out << YAML::Key << "hinge_residual" << YAML::Value << a.hinge_residual;
+  out << YAML::Key << "axis_observability" << YAML::Value << a.axis_observability;
+  out << YAML::Key << "samples" << YAML::Value << a.samples;
+  out << YAML::EndMap << YAML::EndMap;
+  return std::string(out.c_str()) + "\n";
+}
+
+namespace {
+
+/// Every segment of a body file that names a calibration file: the segment's YAML entry, its node and the file.
+template <class Visit>
+void for_each_body_calibration(const std::string& body_path, Visit visit) {
+  if (body_path.empty()) return;
   YAML::Node root;
   try {
     root = YAML::LoadFile(body_path);
   } catch (const YAML::Exception& e) {
     throw ConfigError(body_path + ":" + std::to_string(e.mark.line + 1) + ": " + e.msg);
   }
-  if (!root.IsMap() || !root["segments"] || !root["segments"].IsSequence()) return out;
+  if (!root.IsMap() || !root["segments"] || !root["segments"].IsSequence()) return;
   for (const YAML::Node& s : root["segments"]) {
     if (!s.IsMap() || !s["calibration"] || !s["name"]) continue;
     const std::string node = s["node"] ? s["node"].as<std::string>() : s["name"].as<std::string>();
@@ -169,9 +215,35 @@ std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations
                         "', but segment '" + s["name"].as<std::string>() + "' (" + body_path + ":" +
                         std::to_string(s["calibration"].Mark().line + 1) + ") is on node '" + node + "'");
     }
-    out[node] = std::move(doc.calibration);
+    visit(s, node, file, doc);
   }
+}
+
+}  // namespace
+
+std::unordered_map<std::string, calib::SensorCalibration> load_body_calibrations(const std::string& body_path) {
+  std::unordered_map<std::string, calib::SensorCalibration> out;
+  for_each_body_calibration(body_path, [&out](const YAML::Node&, const std::string& node, const std::string&,
+                                              CalibrationDocument& doc) { out[node] = std::move(doc.calibration); });
   return out;
+}
+
+void apply_body_alignments(const std::string& body_path, fusion::BodyModel& body) {
+  for_each_body_calibration(
+      body_path, [&](const YAML::Node& s, const std::string&, const std::string& file, const CalibrationDocument& doc) {
+        if (!doc.alignment) return;
+        const std::string name = s["name"].as<std::string>();
+        const std::string where = body_path + ":" + std::to_string(s["calibration"].Mark().line + 1);
+        if (doc.alignment->segment != name)
+          throw ConfigError(file + ": this alignment was fitted for segment '" + doc.alignment->segment +
+                            "', but it is named by segment '" + name + "' (" + where + ")");
+        if (s["sensor_axes"] || s["sensor_to_segment"])
+          throw ConfigError(where + ": segment '" + name +
+                            "' gives its mounting twice: sensor_axes or sensor_to_segment, and an alignment in " +
+                            file + "; keep one");
+        if (const auto i = body.find_segment(name))
+          body.segments[*i].sensor_to_segment = doc.alignment->sensor_to_segment;
+      });
 }
 
 std::string resolve_relative(const std::string& path, const std::string& relative_to) {

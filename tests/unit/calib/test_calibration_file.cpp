@@ -76,7 +76,8 @@ TEST_F(TempDir, BadFilesNameTheLineAndTheProblem) {
             "bad.yaml:2: magnetometer transform is singular");
   EXPECT_NE(message("magnetometr:\n  bias: [1, 2, 3]\n").find("bad.yaml:1: unknown key 'magnetometr'"),
             std::string::npos);
-  EXPECT_EQ(message("node: a\n"), "bad.yaml:1: the calibration file holds no magnetometer, accelerometer or gyroscope");
+  EXPECT_EQ(message("node: a\n"),
+            "bad.yaml:1: the calibration file holds no magnetometer, accelerometer, gyroscope or alignment");
   EXPECT_NE(message("magnetometer: [\n").find("YAML syntax error"), std::string::npos);
   EXPECT_THROW((void)load_calibration_file((dir_ / "missing.yaml").string()), ConfigError);
 }
@@ -143,6 +144,85 @@ TEST_F(TempDir, BodyKeyWithABadFileStopsAtTheSegmentsLine) {
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("broken.yaml:2: magnetometer bias must be a list of 3 numbers"),
               std::string::npos)
+        << e.what();
+  }
+}
+
+TEST_F(TempDir, AlignmentFileLoadsBackExactlyWithWhatItWasFittedFrom) {
+  AlignmentRecord a;
+  a.segment = "shank_l";
+  a.sensor_to_segment = calib::Quat(Eigen::AngleAxisd(2.0, calib::Vec3(1, -2, 0.5).normalized()));
+  a.source = "pose+hinge thigh_l-shank_l";
+  a.hinge_residual = 0.031;
+  a.axis_observability = 0.052;
+  a.samples = 2400;
+  const std::string path = write("shank_l.alignment.calib.yaml", alignment_to_yaml("shank_l", a, "lab-7"));
+  const CalibrationDocument doc = load_calibration_document(path);
+  EXPECT_EQ(doc.node, "shank_l");
+  EXPECT_EQ(doc.request_id, "lab-7");
+  EXPECT_TRUE(doc.calibration.empty()) << "an alignment file holds no channel calibration";
+  ASSERT_TRUE(doc.alignment);
+  EXPECT_EQ(doc.alignment->segment, "shank_l");
+  // Written with 12 significant digits: the rotation comes back within 1e-10 rad.
+  EXPECT_LT(doc.alignment->sensor_to_segment.angularDistance(a.sensor_to_segment), 1e-10);
+  EXPECT_EQ(doc.alignment->source, a.source);
+  EXPECT_DOUBLE_EQ(doc.alignment->hinge_residual, 0.031);
+  EXPECT_DOUBLE_EQ(doc.alignment->axis_observability, 0.052);
+  EXPECT_EQ(doc.alignment->samples, 2400u);
+}
+
+TEST_F(TempDir, BadAlignmentsNameTheLineAndTheProblem) {
+  auto error_of = [&](const std::string& text) {
+    try {
+      load_calibration_document(write("a.calib.yaml", text));
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error_of("alignment:\n  segment: s\n  sensor_to_segment: [2, 0, 0, 0]\n")
+                .find(":3: sensor_to_segment "
+                      "must be a unit"),
+            std::string::npos);
+  EXPECT_NE(error_of("alignment:\n  sensor_to_segment: [1, 0, 0, 0]\n").find("needs segment"), std::string::npos);
+  EXPECT_NE(error_of("alignment:\n  segment: s\n  sensor_to_segment: [1, 0, 0]\n").find("[w, x, y, z]"),
+            std::string::npos);
+}
+
+TEST_F(TempDir, BodyKeyAppliesAnAlignmentToItsSegmentOnly) {
+  AlignmentRecord a;
+  a.segment = "shank_l";
+  a.sensor_to_segment = calib::Quat(Eigen::AngleAxisd(1.0, calib::Vec3::UnitX()));
+  write("shank.calib.yaml", alignment_to_yaml("shank_l", a));
+  const std::string body_path = write("body.yaml",
+                                      "segments:\n  - name: thigh_l\n  - name: shank_l\n    parent: thigh_l\n"
+                                      "    calibration: shank.calib.yaml\n");
+  fusion::BodyModel body = load_body_model(body_path);
+  apply_body_alignments(body_path, body);
+  EXPECT_FALSE(body.segments[0].sensor_to_segment);
+  ASSERT_TRUE(body.segments[1].sensor_to_segment);
+  EXPECT_LT(body.segments[1].sensor_to_segment->angularDistance(a.sensor_to_segment), 1e-10);
+  // Fitted for another segment: refused, naming both.
+  a.segment = "thigh_l";
+  write("shank.calib.yaml", alignment_to_yaml("shank_l", a));
+  try {
+    apply_body_alignments(body_path, body);
+    ADD_FAILURE() << "an alignment of another segment was applied";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("fitted for segment 'thigh_l'"), std::string::npos) << e.what();
+  }
+  // Two mountings for one sensor: refused at the body file's line.
+  a.segment = "shank_l";
+  write("shank.calib.yaml", alignment_to_yaml("shank_l", a));
+  const std::string twice = write("twice.yaml",
+                                  "segments:\n  - name: shank_l\n    sensor_to_segment: [1, 0, 0, 0]\n"
+                                  "    calibration: shank.calib.yaml\n");
+  body = load_body_model(twice);
+  try {
+    apply_body_alignments(twice, body);
+    ADD_FAILURE() << "two mountings were accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("twice.yaml:4: segment 'shank_l' gives its mounting twice"), std::string::npos)
         << e.what();
   }
 }

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -80,6 +82,50 @@ TEST(GuardedTypeSupport, ATruncatedPayloadIsRefusedAndLeavesNothingOfItsBytes) {
   EXPECT_FALSE(last_deserialize_failed());
   EXPECT_EQ(decoded.node_id(), "pelvis");
   EXPECT_EQ(decoded.seq(), 42u);
+}
+
+/// A seed of the CDR fuzz corpus as a reader receives it: the first byte picks the type (fuzz_cdr.cpp), the rest
+/// is the payload.
+SerializedPayload_t corpus_payload(const std::string& name) {
+  std::ifstream in(std::string(BSN_FUZZ_CORPUS_DIR) + "/cdr/" + name, std::ios::binary);
+  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_GT(bytes.size(), 1u) << name;
+  SerializedPayload_t payload(static_cast<std::uint32_t>(bytes.size()));
+  if (bytes.size() > 1) std::memcpy(payload.data, bytes.data() + 1, bytes.size() - 1);
+  payload.length = static_cast<std::uint32_t>(bytes.size() > 1 ? bytes.size() - 1 : 0);
+  return payload;
+}
+
+TEST(GuardedTypeSupport, TheAlignmentFieldsRoundTripAndTheCorpusSeedsDecodeToThem) {
+  Guarded<bsn::CalibrationResultPubSubType> type;
+  bsn::CalibrationResult r;
+  r.node_id("shank_l");
+  r.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+  r.segment("shank_l");
+  r.sensor_to_segment({0.5, 0.5, -0.5, 0.5});
+  r.alignment_source("pose+hinge thigh_l-shank_l");
+  r.axis_observability(0.052);
+  SerializedPayload_t payload = serialized(type, r);
+  bsn::CalibrationResult decoded;
+  ASSERT_TRUE(type.deserialize(&payload, &decoded));
+  EXPECT_EQ(decoded, r);
+
+  // The seeds hold what the appended fields carry (so the fuzzer starts from payloads that reach them).
+  SerializedPayload_t result_seed = corpus_payload("result_alignment");
+  ASSERT_TRUE(type.deserialize(&result_seed, &decoded));
+  EXPECT_EQ(decoded.kind(), bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+  EXPECT_EQ(decoded.segment(), "shank_l");
+  EXPECT_EQ(decoded.sensor_to_segment(), (std::array<double, 4>{0.5, 0.5, -0.5, 0.5}));
+  EXPECT_EQ(decoded.alignment_source(), "pose+hinge thigh_l-shank_l");
+  EXPECT_DOUBLE_EQ(decoded.axis_observability(), 0.052);
+  Guarded<bsn::CalibrationRequestPubSubType> request_type;
+  bsn::CalibrationRequest request;
+  SerializedPayload_t request_seed = corpus_payload("request_alignment");
+  ASSERT_TRUE(request_type.deserialize(&request_seed, &request));
+  EXPECT_EQ(request.kind(), bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+  EXPECT_EQ(request.node_id(), "*");
+  EXPECT_NE(request.body().find("joint: knee_l"), std::string::npos);
+  EXPECT_DOUBLE_EQ(request.pose_s(), 3.0);
 }
 
 }  // namespace

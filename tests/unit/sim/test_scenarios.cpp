@@ -56,6 +56,7 @@ const std::vector<Expectation>& expectations() {
       {"allan_static_30min", "imu", {1, 900, 1799}, {}},
       {"gait_lower_body", "foot_l", {5, 40}, {21, 23}},
       {"gait_lower_body", "thigh_l", {5, 21, 23}, {}},
+      {"gait_alignment", "foot_r", {1, 10, 40}, {}},
       {"reach_upper_body", "hand_r", {}, {1, 30}},
       {"reach_upper_body", "hand_l", {1, 30}, {}},
   };

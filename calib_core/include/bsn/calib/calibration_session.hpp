@@ -19,9 +19,11 @@ enum class CalibrationKind {
   magnetometer,   ///< B and H from still poses turned by hand (|u| = field_magnitude)
   gyro_bias,      ///< mean gyro rate at rest
   accelerometer,  ///< B and H from still poses (|u| = g)
+  alignment,      ///< sensor-to-segment rotation of a body's nodes together: AlignmentSession, not this one
 };
 
-/// "magnetometer", "gyro-bias", "accelerometer": the names of the client's --kind and of the store's files.
+/// "magnetometer", "gyro-bias", "accelerometer", "alignment": the names of the client's --kind and of the store's
+/// files.
 const char* kind_name(CalibrationKind kind);
 /// The kind of a name (kind_name's, or "gyro_bias"), nullopt if unknown.
 std::optional<CalibrationKind> parse_kind(std::string_view name);

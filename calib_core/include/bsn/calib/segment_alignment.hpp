@@ -90,6 +90,7 @@ struct SegmentAlignmentResult {
   std::optional<Quat> sensor_to_segment;  ///< nullopt: not aligned (see problem)
   std::string source;                     ///< "hinge <parent>-<child>" or "pose heading"
   double relative_residual = 0.0;         ///< of the hinge used (0 for the pose heading)
+  double axis_observability = 0.0;        ///< of the hinge axis used, in this segment's sensor (0: pose heading)
   std::string problem;
 };
 
