@@ -135,7 +135,7 @@ void FusionService::on_alignment(const bsn::CalibrationResult& r) {
   logging::log_info("node '", spec.node, "' (", spec.name, "): alignment '", r.request_id(), "' (",
                     logging::printable(r.alignment_source()),
                     ") applied from its next sample on: bsn/orientation reports the segment frame");
-  publish_status(dds::monotonic_ns());
+  status_due_ = true;
 }
 
 void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer) {
