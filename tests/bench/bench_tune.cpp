@@ -42,7 +42,8 @@ int main(int argc, char** argv) {
     const sim::ScenarioSpec spec = sim::load_scenario(std::string(BSN_SCENARIO_DIR) + "/" + scenarios[s] + ".yaml");
     const eval::TuneRecording rec{scenarios[s], eval::simulate_recording(spec), {}};
     eval::TuneSetup setup;
-    setup.base = {"mekf", {{"preset", static_cast<double>(preset_of[s])}}};
+    setup.base = {"mekf",
+                  {{"preset", static_cast<double>(preset_of[s])}, {"mag_latency_s", 0.0}}};  // no lag: as the test
     setup.ranges = eval::default_param_ranges("mekf");
     setup.fit = {&rec};
     setup.threads = threads;

@@ -287,15 +287,16 @@ void expect_the_kinematic_heading_holds(const KneeRun& plain, const KneeRun& kin
 }
 
 TEST(HingeHeading, KneeAnglesSurviveFanTestEWithTheDefaultFilter) {
-  // seel_ruppin rejects the thigh's field, which keeps changing as the thigh swings through the floor's fading top,
-  // and keeps its heading; the shank's field is steady deep in the region and is adopted after 20 s
-  // (mag_max_rejection_s): the shank's heading errs by the disturbed field's declination, the thigh's hardly.
+  // seel_ruppin rejects both disturbed fields and keeps its headings, until after a long rejection
+  // (mag_max_rejection_s) it takes the shank's steady field in with a reduced gain: the shank's heading drifts
+  // towards the disturbed field's declination (4-5 deg RMS over the run), the thigh's hardly. The knee must
+  // still stay within 3 deg where a segment's own heading errs by more.
   const KneeRun plain = run_knee(false), kinematic = run_knee(true);
   print("plain", plain);
   print("kinematic", kinematic);
   ASSERT_GT(kinematic.samples, 9000u);  // 94 s at 100 Hz
   expect_the_kinematic_heading_holds(plain, kinematic);
-  EXPECT_GT(kinematic.shank_heading_rmse_deg, 10.0);
+  EXPECT_GT(kinematic.shank_heading_rmse_deg, 3.0);
 }
 
 TEST(HingeHeading, KneeAnglesSurviveFanTestEWhileBothSegmentsHeadingsErr) {

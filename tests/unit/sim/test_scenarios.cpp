@@ -80,7 +80,7 @@ TEST(SimScenarios, EveryShippedScenarioLoadsAndIsChecked) {
     EXPECT_NO_THROW(ScenarioRunner(spec, {}, false)) << stem;
     EXPECT_TRUE(checked.count(stem)) << stem << " has no disturbance expectations in this test";
   }
-  EXPECT_EQ(files, 16);
+  EXPECT_EQ(files, 17);
 }
 
 TEST(SimScenarios, DisturbancesShowWhereTheScenarioPutsThem) {
