@@ -72,8 +72,12 @@ TEST_F(DemoCommand, Demo) {
   // simulator's truth (the issue's bound; the filters reach 1-2 deg on this motion).
   const std::map<std::string, std::pair<double, double>> ranges{
       {"hip", {-20, 35}}, {"knee", {0, 65}}, {"ankle", {-20, 15}}};
+  // The error column (the largest of the three angles' errors at each instant) is within 3 deg rms too: the issue asks
+  // it of the live column, and the knees' and ankles' axial rotation, the hardest angle, follows the heading
+  // difference of two filters, which the demo's kinematic heading takes from the hinge.
   const std::regex joint_summary(
-      R"(bsn demo: ((hip|knee|ankle)_[lr]) \S+ (-?[\d.]+) \.\. (-?[\d.]+) deg, error against the truth ([\d.]+) deg rms)");
+      R"(bsn demo: ((hip|knee|ankle)_[lr]) \S+ (-?[\d.]+) \.\. (-?[\d.]+) deg, error against the truth ([\d.]+) deg rms)"
+      R"( over \d+ samples \(error column, the largest of the three angles: ([\d.]+) deg rms\))");
   int joints = 0;
   for (auto it = std::sregex_iterator(out.begin(), out.end(), joint_summary); it != std::sregex_iterator(); ++it) {
     const std::smatch& j = *it;
@@ -84,6 +88,7 @@ TEST_F(DemoCommand, Demo) {
     EXPECT_LE(std::stod(j[4].str()), hi + 5.0);
     EXPECT_GT(std::stod(j[4].str()) - std::stod(j[3].str()), 10.0) << "the joint hardly moves";
     EXPECT_LT(std::stod(j[5].str()), 3.0);
+    EXPECT_LT(std::stod(j[6].str()), 3.0) << "error column";
   }
   EXPECT_EQ(joints, 6) << "joints with a range and an error against the truth";
 
