@@ -34,17 +34,7 @@ std::vector<std::string> split_nodes(const std::string& list) {
 }
 
 calib::SessionSample to_session_sample(const bsn::RawSample& raw) {
-  const fusion::ImuSample imu = dds::to_imu_sample(raw);
-  calib::SessionSample s;
-  s.seq = raw.seq();
-  s.timestamp_ns = imu.timestamp_ns;
-  s.acc = imu.acc;
-  s.gyr = imu.gyr;
-  s.mag = imu.mag;
-  s.has_acc = imu.has_acc;
-  s.has_gyr = imu.has_gyr;
-  s.has_mag = imu.has_mag;
-  return s;
+  return session_sample(dds::to_imu_sample(raw), raw.seq());
 }
 
 std::array<double, 3> arr(const calib::Vec3& v) { return {v.x(), v.y(), v.z()}; }
@@ -145,6 +135,19 @@ std::vector<calib::AlignmentNode> alignment_nodes(const fusion::BodyModel& body,
     }
   }
   return out;
+}
+
+calib::SessionSample session_sample(const fusion::ImuSample& imu, std::uint64_t seq) {
+  calib::SessionSample s;
+  s.seq = seq;
+  s.timestamp_ns = imu.timestamp_ns;
+  s.acc = imu.acc;
+  s.gyr = imu.gyr;
+  s.mag = imu.mag;
+  s.has_acc = imu.has_acc;
+  s.has_gyr = imu.has_gyr;
+  s.has_mag = imu.has_mag;
+  return s;
 }
 
 bsn::CalibrationKind to_wire(calib::CalibrationKind kind) {

@@ -17,6 +17,7 @@
 #include "bsn/calib/calibration_session.hpp"
 #include "bsn/dds/participant.hpp"
 #include "bsn/fusion/body_model.hpp"
+#include "bsn/fusion/imu_sample.hpp"
 #include "calibration_store.hpp"
 #include "command.hpp"
 
@@ -95,6 +96,9 @@ class CalibrationService {
 /// `problem` says so and the result is empty.
 std::vector<calib::AlignmentNode> alignment_nodes(const fusion::BodyModel& body, const std::vector<std::string>& wanted,
                                                   std::string& problem);
+
+/// A sample of the calibration sessions from a fusion-core sample (live from bsn/raw, or from a recording).
+calib::SessionSample session_sample(const fusion::ImuSample& imu, std::uint64_t seq);
 
 /// The wire kind of a core kind and back (nullopt for a value outside the enum, e.g. from another vendor).
 bsn::CalibrationKind to_wire(calib::CalibrationKind kind);

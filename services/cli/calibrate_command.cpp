@@ -417,16 +417,8 @@ int run_offline_alignment(const CalibrateOptions& opt) {
   }
   calib::AlignmentSession session(nodes, params, arrivals.front().t);
   for (const Arrival& a : arrivals) {
-    const fusion::ImuSample x = recordings[a.node].sample(a.index);
-    calib::SessionSample s;
-    s.seq = a.index;
+    calib::SessionSample s = session_sample(recordings[a.node].sample(a.index), a.index);
     s.timestamp_ns = a.t;
-    s.acc = x.acc;
-    s.gyr = x.gyr;
-    s.mag = x.mag;
-    s.has_acc = x.has_acc;
-    s.has_gyr = x.has_gyr;
-    s.has_mag = x.has_mag;
     session.add(a.node, s, a.t);
   }
   const calib::AlignmentSessionResult r = session.finish(arrivals.back().t);

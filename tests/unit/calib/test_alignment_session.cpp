@@ -6,6 +6,7 @@
 
 #include <numbers>
 
+#include "alignment_scenario.hpp"
 #include "bsn/calib/alignment_session.hpp"
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/sim/scenario.hpp"
@@ -15,22 +16,6 @@ namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr std::uint64_t kSecond = 1'000'000'000ull;
-
-sim::ScenarioSpec lab_session(std::uint64_t seed, double walk_s) {
-  sim::ScenarioSpec spec;
-  spec.name = "alignment_session";
-  spec.body = sim::BodyKind::kLowerBody;
-  spec.seed = seed;
-  sim::Gait gait;
-  gait.alignment = sim::AlignmentMoves{};
-  spec.gait = gait;
-  spec.duration_s = gait.alignment->walk_start_s() + walk_s;
-  spec.sensors = *sim::sensor_preset("consumer_mems");
-  spec.sensors.mag.hard_iron = sim::Vec3::Zero();
-  spec.sensors.mag.soft_iron = sim::Mat3::Identity();
-  spec.mounting = sim::Mounting{180.0, 0.02};
-  return spec;
-}
 
 /// The session's nodes of the simulated body: node ids are segment names; knee -1, hip and ankle +1.
 std::vector<calib::AlignmentNode> nodes_of(const sim::Body& body) {
@@ -95,7 +80,7 @@ Fed feed(calib::AlignmentSession& session, const sim::ScenarioSpec& spec, double
 }
 
 TEST(AlignmentSession, AlignsEveryNodeOfTheLabProcedureAndSaysWhatToDo) {
-  const sim::ScenarioSpec spec = lab_session(31, 6.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(31, 6.0);
   sim::ScenarioRunner probe(spec, {}, false);
   calib::AlignmentSessionParams params;
   params.duration_s = spec.duration_s + 10.0;  // ends by the scenario's end, not by time
@@ -136,7 +121,7 @@ TEST(AlignmentSession, AlignsEveryNodeOfTheLabProcedureAndSaysWhatToDo) {
 }
 
 TEST(AlignmentSession, UntilGoodEndsOnceEveryJointHasMoved) {
-  const sim::ScenarioSpec spec = lab_session(32, 6.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(32, 6.0);
   sim::ScenarioRunner probe(spec, {}, false);
   calib::AlignmentSessionParams params;
   params.duration_s = 300.0;
@@ -152,7 +137,7 @@ TEST(AlignmentSession, UntilGoodEndsOnceEveryJointHasMoved) {
 }
 
 TEST(AlignmentSession, ANodeThatNeverSendsEndsTheCollectionWithItsName) {
-  const sim::ScenarioSpec spec = lab_session(33, 1.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(33, 1.0);
   sim::ScenarioRunner probe(spec, {}, false);
   calib::AlignmentSessionParams params;
   params.duration_s = 60.0;
@@ -169,7 +154,7 @@ TEST(AlignmentSession, ANodeThatNeverSendsEndsTheCollectionWithItsName) {
 }
 
 TEST(AlignmentSession, NodesOnDifferentClocksAreRefusedWithTheOffset) {
-  const sim::ScenarioSpec spec = lab_session(34, 1.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(34, 1.0);
   sim::ScenarioRunner probe(spec, {}, false);
   calib::AlignmentSessionParams params;
   params.duration_s = 10.0;
@@ -184,7 +169,7 @@ TEST(AlignmentSession, NodesOnDifferentClocksAreRefusedWithTheOffset) {
 
 TEST(AlignmentSession, NoStillStartIsNoPose) {
   // From the first flexion on: the body never stands still for the 3 s of the pose before the walking.
-  const sim::ScenarioSpec spec = lab_session(35, 4.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(35, 4.0);
   sim::ScenarioRunner probe(spec, {}, false);
   calib::AlignmentSessionParams params;
   params.duration_s = 60.0;

@@ -7,6 +7,7 @@
 #include <map>
 #include <numbers>
 
+#include "alignment_scenario.hpp"
 #include "bsn/calib/segment_alignment.hpp"
 #include "bsn/fusion/body_fusion.hpp"
 #include "bsn/sim/scenario.hpp"
@@ -15,24 +16,6 @@ namespace bsn {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-
-/// The lab session in simulation: consumer MEMS (magnetometer calibrated before, as a lab does), sensors at any
-/// orientation and up to 2 cm off their place, the alignment moves, then `walk_s` of walking on the spot.
-sim::ScenarioSpec session(std::uint64_t seed, double walk_s) {
-  sim::ScenarioSpec spec;
-  spec.name = "alignment_session";
-  spec.body = sim::BodyKind::kLowerBody;
-  spec.seed = seed;
-  sim::Gait gait;
-  gait.alignment = sim::AlignmentMoves{};
-  spec.gait = gait;
-  spec.duration_s = gait.alignment->walk_start_s() + walk_s;
-  spec.sensors = *sim::sensor_preset("consumer_mems");
-  spec.sensors.mag.hard_iron = sim::Vec3::Zero();
-  spec.sensors.mag.soft_iron = sim::Mat3::Identity();
-  spec.mounting = sim::Mounting{180.0, 0.02};
-  return spec;
-}
 
 /// Every segment's samples of a whole session.
 struct Recorded {
@@ -88,7 +71,7 @@ double axis_error_deg(const calib::Vec3& a, const calib::Vec3& b) {
 TEST(SegmentAlignment, FunctionalFitRecoversTheKneeAxis) {
   // Seel et al. 2014 report the knee axis within about 1 deg of the optical one; 2 deg leaves room for consumer
   // MEMS noise, bias and scale errors and the jitter between the two sensors' sampling instants.
-  const sim::ScenarioSpec spec = session(21, 10.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(21, 10.0);
   const Recorded rec = run(spec);
   const auto in = alignment_input(rec, *spec.gait->alignment, spec.rate_hz);
   for (const char* side : {"_l", "_r"}) {
@@ -129,7 +112,7 @@ std::map<std::string, fusion::Vec3> joint_rmse(const Recorded& rec, const fusion
 }
 
 TEST(SegmentAlignment, GaitAnglesFollowTheTruthAfterTheAlignmentOnly) {
-  const sim::ScenarioSpec spec = session(22, 60.0);
+  const sim::ScenarioSpec spec = calib::testing::alignment_session_scenario(22, 60.0);
   const Recorded rec = run(spec);
   const calib::BodyAlignment alignment = calib::align_body(alignment_input(rec, *spec.gait->alignment, spec.rate_hz));
   ASSERT_EQ(alignment.problem, "");
