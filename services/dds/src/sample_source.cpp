@@ -61,6 +61,9 @@ bool finite_values(const bsn::Orientation& o) {
          all_finite(o.gyro_bias());
 }
 
-bool finite_values(const bsn::JointAngles& j) { return all_finite(j.quat()) && all_finite(j.angles()); }
+bool finite_values(const bsn::JointAngles& j) {
+  return all_finite(j.quat()) && all_finite(j.angles()) && all_finite(j.anatomical()) &&
+         std::isfinite(j.heading_offset()) && std::isfinite(j.heading_observability());
+}
 
 }  // namespace bsn::dds

@@ -64,8 +64,15 @@ TEST(SampleSource, NonFiniteEstimatesAreNoticed) {
   bsn::JointAngles j;
   j.quat({1.0, 0.0, 0.0, 0.0});
   EXPECT_TRUE(finite_values(j));
-  j.angles({0.0, 0.0, -std::numeric_limits<double>::infinity()});
-  EXPECT_FALSE(finite_values(j));
+  for (int field = 0; field < 4; ++field) {
+    bsn::JointAngles bad = j;
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    if (field == 0) bad.angles({0.0, 0.0, -std::numeric_limits<double>::infinity()});
+    if (field == 1) bad.anatomical({0.0, nan, 0.0});
+    if (field == 2) bad.heading_offset(nan);
+    if (field == 3) bad.heading_observability(std::numeric_limits<double>::infinity());
+    EXPECT_FALSE(finite_values(bad)) << field;
+  }
 }
 
 }  // namespace

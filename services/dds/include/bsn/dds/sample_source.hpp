@@ -44,7 +44,8 @@ class KeyWriters {
   std::unordered_map<std::string, std::vector<Heard>> keys_;
 };
 
-/// True when every number an estimate carries (quaternion, angles, gyro bias) is finite.
+/// True when every number an estimate carries (quaternion, angles, gyro bias; a joint's anatomical angles and
+/// kinematic heading too) is finite.
 bool finite_values(const bsn::Orientation& o);
 bool finite_values(const bsn::JointAngles& j);
 
