@@ -320,11 +320,15 @@ int run_demo(const DemoOptions& opt) {
     std::fprintf(stderr, "bsn demo: error: %s\n", e.what());
     return 2;
   }
+  // The default body walks: every node publishes its segment of one scenario from one common start, so the body
+  // moves as one; the calibration service aligns the sensors first. A body file of the user's (or --random) gives
+  // each node its own random motion on the default mounting.
+  const bool walking = opt.body_path.empty() && !opt.random;
   // The walking body is aligned before it walks, so its knees and ankles, hinge-like, take the heading between
   // their two segments from the hinge constraint (heading: kinematic), as a lab would: measured on this demo, the
   // largest error of any of the three angles after the alignment went from 5.2 deg (left ankle's axial rotation,
   // the two filters' heading difference) to 1.0 deg, and from 2.3 to 1.3 deg at the left knee.
-  if (opt.body_path.empty() && !opt.random) {
+  if (walking) {
     for (fusion::SegmentSpec& s : body.segments) {
       const fusion::JointType type = fusion::joint_convention(s).type;
       if (type == fusion::JointType::kKnee || type == fusion::JointType::kAnkle) s.kinematic_heading.emplace();
@@ -371,10 +375,6 @@ int run_demo(const DemoOptions& opt) {
           view.have_status = true;
         });
 
-    // The default body walks: every node publishes its segment of one scenario from one common start, so the
-    // body moves as one; the calibration service aligns the sensors first. A body file of the user's (or --random)
-    // gives each node its own random motion on the default mounting.
-    const bool walking = opt.body_path.empty() && !opt.random;
     std::vector<std::unique_ptr<dds::ChildProcess>> sims;
     std::unique_ptr<dds::ChildProcess> fusion_process, calibration_process;
     std::unique_ptr<dds::Writer<bsn::CalibrationRequest>> request_writer;
