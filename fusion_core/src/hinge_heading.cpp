@@ -11,6 +11,11 @@ namespace {
 
 constexpr const char* kOwner = "kinematic heading";
 
+// The weight of a new sample in an exponential window after dt_ns: 1 - exp(-dt / window).
+double window_weight(std::uint64_t dt_ns, double inverse_window_s) {
+  return -std::expm1(-1e-9 * static_cast<double>(dt_ns) * inverse_window_s);
+}
+
 void require_axis(const Vec3& axis, const char* name) {
   if (!axis.allFinite() || !(axis.norm() > 1e-9)) {
     throw std::invalid_argument(std::string(kOwner) + ": " + name + " must be a finite, non-zero vector");
@@ -50,9 +55,8 @@ const HingeHeadingEstimator::State& HingeHeadingEstimator::update(const Quat& q_
   const bool restart =
       !s.started || timestamp_ns < s.timestamp_ns || timestamp_ns - s.timestamp_ns > coefficients_.max_step_ns;
   if (restart && s.started) reset();
-  // The weight of this sample in the exponential window: 1 - exp(-dt / window); the first sample is the window.
-  const double dt = s.started ? 1e-9 * static_cast<double>(timestamp_ns - s.timestamp_ns) : 0.0;
-  const double alpha = s.started ? -std::expm1(-dt * coefficients_.inverse_window_s) : 1.0;
+  // The weight of this sample in the exponential window; the first sample is the window.
+  const double alpha = s.started ? window_weight(timestamp_ns - s.timestamp_ns, coefficients_.inverse_window_s) : 1.0;
   s.started = true;
 
   const Vec3 a = rotate(q_parent, coefficients_.parent_axis);  // the axis as the parent sees it, earth frame
@@ -66,10 +70,8 @@ const HingeHeadingEstimator::State& HingeHeadingEstimator::update(const Quat& q_
   if (s.observed) {
     // The window of the counted samples runs on the time since the last counted one, so after a phase with the
     // axis near vertical the new samples take over as fast as the window allows (the offset may have moved).
-    const double counted_alpha = s.estimated
-                                     ? -std::expm1(-1e-9 * static_cast<double>(timestamp_ns - s.counted_timestamp_ns) *
-                                                   coefficients_.inverse_window_s)
-                                     : 1.0;
+    const double counted_alpha =
+        s.estimated ? window_weight(timestamp_ns - s.counted_timestamp_ns, coefficients_.inverse_window_s) : 1.0;
     const double dot = a.x() * b.x() + a.y() * b.y();    // |a_h| |b_h| cos d
     const double cross = b.x() * a.y() - b.y() * a.x();  // |a_h| |b_h| sin d: turns b_h onto a_h
     s.sum_cos += counted_alpha * (dot - s.sum_cos);
