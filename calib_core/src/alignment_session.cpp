@@ -14,10 +14,6 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // The N-pose means leave out this much at each end of the rest: the settling after and before a movement, s.
 constexpr double kPoseEdgeTrim_s = 0.25;
 
-double seconds_between(std::uint64_t from_ns, std::uint64_t to_ns) {
-  return to_ns > from_ns ? static_cast<double>(to_ns - from_ns) * 1e-9 : 0.0;
-}
-
 std::string one_decimal(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.1f", v);

@@ -13,10 +13,6 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kNeverStartedTimeout_s = 5.0;
 constexpr std::size_t kMinFitPoses = 5;  // eq. 29
 
-double seconds_between(std::uint64_t from_ns, std::uint64_t to_ns) {
-  return to_ns > from_ns ? static_cast<double>(to_ns - from_ns) * 1e-9 : 0.0;
-}
-
 // The half of the sphere (in the sensor frame) that holds the fewest corrected pose directions, as words, and
 // the way to turn the sensor to fill it. "" when every half holds at least two.
 std::string missing_half(const Points3& directions, CalibrationKind kind) {

@@ -14,10 +14,7 @@ namespace bsn::services {
 namespace {
 
 constexpr std::size_t kMaxNodeIdLength = 63;  // as bsn::RawSample.node_id
-
-double seconds_between(std::uint64_t from, std::uint64_t to) {
-  return to > from ? static_cast<double>(to - from) * 1e-9 : 0.0;
-}
+using calib::seconds_between;
 
 std::vector<std::string> split_nodes(const std::string& list) {
   std::vector<std::string> out;
@@ -248,7 +245,7 @@ void CalibrationService::publish_stored() {
 
 void CalibrationService::refuse(const std::string& request_id, const std::string& why) {
   logging::log_warn("request '", request_id, "' refused: ", why);
-  if (!request_id.empty() && refusals_.size() < kMaxRefusalsKept) refusals_[request_id] = why;
+  if (const auto answered = answered_.find(request_id); answered != answered_.end()) answered->second = why;
   publish_refusal(request_id, why);
 }
 
@@ -279,12 +276,12 @@ void CalibrationService::on_request(const bsn::CalibrationRequest& request) {
     refuse(id, "the request has no request_id");
     return;
   }
-  if (!answered_.insert(id).second) {
+  if (const auto [answered, first] = answered_.try_emplace(id); !first) {
     // A refusal is said again: its requester sends again when no answer came, since the refusal can go out before
     // this writer has matched the requester's progress reader (discovery runs each way on its own).
-    if (const auto refused = refusals_.find(id); refused != refusals_.end()) {
+    if (!answered->second.empty()) {
       logging::log_info("request '", id, "' arrived again; its refusal is sent again");
-      publish_refusal(id, refused->second);
+      publish_refusal(id, answered->second);
       return;
     }
     logging::log_info("request '", id, "' arrived again; it is answered once, this copy is ignored");

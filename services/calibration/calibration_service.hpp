@@ -8,7 +8,6 @@
 #include <memory>
 #include <mutex>
 #include <optional>
-#include <set>
 #include <string>
 #include <unordered_map>
 #include <vector>
@@ -80,9 +79,8 @@ class CalibrationService {
   mutable std::mutex mutex_;
   std::map<std::string, Run> runs_;                    ///< by request id
   std::unordered_map<std::string, std::string> busy_;  ///< node -> the request collecting it
-  std::set<std::string> answered_;                     ///< every request id ever accepted or refused
-  std::map<std::string, std::string> refusals_;        ///< refused request id -> why (said again on a repeat)
-  static constexpr std::size_t kMaxRefusalsKept = 10000;
+  /// Every request id ever accepted ("") or refused (why: said again on a repeat).
+  std::map<std::string, std::string> answered_;
   std::unordered_map<std::string, std::uint64_t> heard_;                        ///< node -> last arrival on bsn/raw
   std::map<std::pair<std::string, int>, bsn::CalibrationResult> last_success_;  ///< (node, kind) -> stored result
   std::unique_ptr<dds::Writer<bsn::CalibrationResult>> result_writer_;

@@ -66,6 +66,11 @@ struct SessionParams {
 std::string validate(const SessionParams& params);
 
 /// One raw sample as the node sent it (uncalibrated), with a flag per channel present.
+/// Seconds from one arrival or sensor time to a later one, ns in; 0 when `to_ns` is not later.
+inline double seconds_between(std::uint64_t from_ns, std::uint64_t to_ns) {
+  return to_ns > from_ns ? static_cast<double>(to_ns - from_ns) * 1e-9 : 0.0;
+}
+
 struct SessionSample {
   std::uint64_t seq = 0;
   std::uint64_t timestamp_ns = 0;  ///< sensor clock
