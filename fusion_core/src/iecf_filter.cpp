@@ -80,11 +80,7 @@ UpdateResult IecfFilter::start(const ImuSample& s) {
 }
 
 UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
-  // The magnetometer reading brought forward by its own delay behind the gyro (lag_compensated, mag_latency_s), so
-  // that a fast turn does not pull the heading towards where the sensor pointed that long ago.
-  const Vec3 mag = s.has_mag && s.has_gyr && params_.mag_latency_s > 0.0
-                       ? lag_compensated(s.mag, s.gyr - bias_.bias(), params_.mag_latency_s)
-                       : s.mag;
+  const Vec3 mag = mag_at_gyro_time(s, bias_.bias(), params_.mag_latency_s);  // the magnetometer's own delay
   const std::uint64_t dt_ns = s.timestamp_ns - clock().last_ns;
   const std::uint64_t since_init_ns = s.timestamp_ns - clock().init_ns;
   const double gain =

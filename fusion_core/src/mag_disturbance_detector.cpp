@@ -67,12 +67,16 @@ double asin_clamped(double x) { return std::asin(std::clamp(x, -1.0, 1.0)); }
 }  // namespace
 
 void MagDisturbanceDetector::set_reference(double norm_uT, double dip_rad, double averaged_s) {
-  set_reference_sine(norm_uT, std::isfinite(dip_rad) ? std::sin(dip_rad) : dip_rad);
+  set_reference_sine(norm_uT, std::isfinite(dip_rad) ? std::sin(dip_rad) : dip_rad, averaged_s);
+}
+
+void MagDisturbanceDetector::set_reference_sine(double norm_uT, double sin_dip, double averaged_s) {
+  set_reference_bounds(norm_uT, sin_dip);
   state_.ref_clean_s = std::clamp(averaged_s, 0.0, params_.mag_reference_tau_s);
   state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_down = 0.0;
 }
 
-void MagDisturbanceDetector::set_reference_sine(double norm_uT, double sin_dip) {
+void MagDisturbanceDetector::set_reference_bounds(double norm_uT, double sin_dip) {
   state_.reference_known = norm_uT > 0.0 && std::isfinite(norm_uT) && std::isfinite(sin_dip);
   state_.ref_norm = state_.reference_known ? norm_uT : 0.0;
   state_.ref_sin_dip = state_.reference_known ? std::clamp(sin_dip, -1.0, 1.0) : 0.0;
@@ -155,11 +159,7 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     state_.lp_down += k * (down - state_.lp_down);
     state_.dip_tolerance = std::max(tolerance, (1.0 - k) * state_.dip_tolerance);
   }
-  if (!state_.reference_known) {
-    set_reference_sine(state_.lp_norm, state_.lp_down / state_.lp_norm);
-    state_.ref_clean_s = 0.0;
-    state_.ref_pending_s = state_.ref_pending_norm = state_.ref_pending_down = 0.0;
-  }
+  if (!state_.reference_known) set_reference_sine(state_.lp_norm, state_.lp_down / state_.lp_norm);
   const double n = state_.lp_norm, n_down = state_.lp_down;
 
   // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as its sine, |m| sin(dip) against
@@ -200,7 +200,7 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
     if (state_.ref_pending_s >= kReferenceStepS) {
       const double clean_s = std::min(state_.ref_clean_s + state_.ref_pending_s, params_.mag_reference_tau_s);
       const double k = state_.ref_pending_s / clean_s;
-      set_reference_sine(
+      set_reference_bounds(
           state_.ref_norm + k * (state_.ref_pending_norm / state_.ref_pending_s - state_.ref_norm),
           state_.ref_sin_dip + k * (state_.ref_pending_down / state_.ref_pending_norm - state_.ref_sin_dip));
       state_.ref_clean_s = clean_s;

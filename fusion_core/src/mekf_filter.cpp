@@ -411,12 +411,8 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n, dou
 }
 
 UpdateResult MekfFilter::step(const ImuSample& s_in, double dt) {
-  // The magnetometer reading brought forward by its own delay behind the gyro (lag_compensated, mag_latency_s), so
-  // that a fast turn does not pull the heading towards where the sensor pointed that long ago.
   ImuSample s_fwd = s_in;
-  if (s_in.has_mag && s_in.has_gyr && params_.mag_latency_s > 0.0) {
-    s_fwd.mag = lag_compensated(s_in.mag, s_in.gyr - state_.bias, params_.mag_latency_s);
-  }
+  s_fwd.mag = mag_at_gyro_time(s_in, state_.bias, params_.mag_latency_s);  // the magnetometer's own delay
   const ImuSample& s = s_fwd;
   state_.flags.reinitialised = false;
   if (adaptive_) adapt(s);

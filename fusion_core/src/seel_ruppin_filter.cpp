@@ -299,16 +299,9 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
   }
   // Only the horizontal part of the rate turns the field's dip (a turn about the vertical keeps it).
   if (s.has_mag) {
-    if (s.has_gyr && params_.mag_latency_s > 0.0) {
-      // The reading brought forward by the magnetometer's own delay (lag_compensated), so that a fast turn does
-      // not pull the heading towards where the sensor pointed mag_latency_s ago.
-      const Vec3 rate = s.gyr - state_.gyro_bias;
-      ImuSample forward = s;
-      forward.mag = lag_compensated(s.mag, rate, params_.mag_latency_s);
-      correct_mag(forward, rate.cross(earth_axis_in_sensor(state_.q, 2)).norm());
-    } else {
-      correct_mag(s, s.has_gyr ? (s.gyr - state_.gyro_bias).cross(earth_axis_in_sensor(state_.q, 2)).norm() : 0.0);
-    }
+    ImuSample forward = s;
+    forward.mag = mag_at_gyro_time(s, state_.gyro_bias, params_.mag_latency_s);  // the magnetometer's own delay
+    correct_mag(forward, s.has_gyr ? (s.gyr - state_.gyro_bias).cross(earth_axis_in_sensor(state_.q, 2)).norm() : 0.0);
   }
   state_.q = renormalised(state_.q);
   const double max_bias = params_.max_gyro_bias_rad_s;

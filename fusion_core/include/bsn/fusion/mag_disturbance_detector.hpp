@@ -34,6 +34,7 @@
 #include <cstdint>
 
 #include "bsn/fusion/filter_params.hpp"
+#include "bsn/fusion/imu_sample.hpp"
 #include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion {
@@ -69,6 +70,13 @@ inline double lag_dip_tolerance(double rate_rad_s, double latency_s) { return st
 /// m(t) = m(t - lag) - lag w x m(t - lag) to first order (at 1000 deg/s and 6.4 ms the neglected term is 0.6 %).
 inline Vec3 lag_compensated(const Vec3& mag, const Vec3& rate_rad_s, double lag_s) {
   return mag - lag_s * rate_rad_s.cross(mag);
+}
+
+/// The magnetometer reading of `s` at its gyro's time: brought forward by lag_s with the bias-corrected rate
+/// (lag_compensated), so that a fast turn does not pull the heading towards where the sensor pointed lag_s ago;
+/// s.mag as it is without a magnetometer or gyro reading, or without lag.
+inline Vec3 mag_at_gyro_time(const ImuSample& s, const Vec3& gyro_bias, double lag_s) {
+  return s.has_mag && s.has_gyr && lag_s > 0.0 ? lag_compensated(s.mag, s.gyr - gyro_bias, lag_s) : s.mag;
 }
 
 class MagDisturbanceDetector {
@@ -174,6 +182,8 @@ class MagDisturbanceDetector {
   /// Sets the reference instead of taking the first reading; it then follows the clean field as described above,
   /// weighted as a mean over averaged_s of clean field.
   void set_reference(double norm_uT, double dip_rad, double averaged_s = 0.0);
+  /// The same from the sine of the dip (positive downwards), as the Kalman filters hold their reference field.
+  void set_reference_sine(double norm_uT, double sin_dip, double averaged_s = 0.0);
 
   bool disturbed() const { return state_.disturbed; }
   /// | |m|_lp - ref | / ref after the last sample (computed on demand).
@@ -192,8 +202,9 @@ class MagDisturbanceDetector {
     double sin_enter_low = 0.0, sin_enter_high = 0.0, sin_leave_low = 0.0, sin_leave_high = 0.0;
   };
 
-  /// The reference from its magnitude and the sine of its dip; bounds derived without trigonometry.
-  void set_reference_sine(double norm_uT, double sin_dip);
+  /// The reference from its magnitude and the sine of its dip, and the bands' bounds derived without trigonometry
+  /// (what the clean field's following moves; the public setters also restart that averaging).
+  void set_reference_bounds(double norm_uT, double sin_dip);
   /// The rules for a long disturbance (new field, reduced gain) after the band decision of a reading.
   void track_disturbance(std::uint64_t t_ns, double dt_s);
 

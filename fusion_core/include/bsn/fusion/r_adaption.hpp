@@ -24,11 +24,10 @@ class MagneticRAdaption {
   explicit MagneticRAdaption(const MagDisturbanceDetector::Params& params) : detector_(params) {}
   MagneticRAdaption() : MagneticRAdaption(MagDisturbanceDetector::Params{}) {}
 
-  /// A reference field: magnitude and the sine and cosine of its dip (the filters derive it once, at their start).
+  /// A reference field: magnitude and the sine of its dip (the filters derive it once, at their start).
   struct Reference {
     double norm = 0.0;     ///< |h_ref|, uT; 0 = not known yet
     double sin_dip = 0.0;  ///< sine of the dip below the horizontal, positive downwards
-    double cos_dip = 1.0;  ///< its cosine (>= 0: dips lie within +-90 deg)
     /// The reference of field m in a frame whose unit upward vertical is `up`.
     static Reference of(const Vec3& m, const Vec3& up);
   };
