@@ -10,7 +10,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev         # tests and benchmarks
   cyclonedds-dev cyclonedds-tools                    # another vendor's DDS, for the interoperability test
   clang-format procps                                # formatting check in CI; ps for diagnostics
-  openssl libssl-dev systemd iproute2               # PKI and random pool for DDS-Security, unit-file checks, netns
+  openssl libssl-dev systemd iproute2               # PKI for DDS-Security and its cost bench, unit files, netns
   clang libclang-rt-14-dev                           # the fuzz targets (libFuzzer, sanitizers) in CI
   libcivetweb-dev libjs-three libjs-chart.js         # bsn view: HTTP/WebSocket server, 3D and plots (offline)
   chromium                                           # bsn view's browser test (headless)

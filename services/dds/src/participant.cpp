@@ -9,7 +9,6 @@
 #include <mutex>
 #include <stdexcept>
 
-#include "bsn/dds/random_pool.hpp"
 #include "bsn/logging/log.hpp"
 
 namespace bsn::dds {
@@ -111,11 +110,6 @@ void add_security(DomainParticipantQos& qos, const std::string& dir) {
   set("dds.sec.access.builtin.Access-Permissions.governance", file_uri("governance.p7s"));
   set("dds.sec.access.builtin.Access-Permissions.permissions", file_uri("permissions.p7s"));
   set("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
-  // The plugin draws a nonce from OpenSSL for every sample it encrypts; the pool makes that draw cheap
-  // (random_pool.hpp). Without it the plugin still works, only slower: say so, never fail.
-  if (!install_random_pool()) {
-    logging::log_warn("OpenSSL refused bsn's random pool: DDS-Security works, at a higher cost per sample");
-  }
 }
 
 DomainParticipantQos participant_qos(const std::string& name) {
