@@ -13,7 +13,8 @@
 //       A.2), instead of the true north;
 //   --reference-late S, --reference-drift-ppm P  the reference shows the truth S + P 1e-6 t seconds late (Nez App.
 //       A.1: 30 ppm, 18 ms after 10 min, before their correction).
-// Usage: bsn_bench_nez_sources [sources] [--evaluations N] [--threads N]
+//   --filter NAME=VALUE  a further fixed MEKF parameter (e.g. mag_rejection=0: without the disturbance detector).
+// Usage: bsn_bench_nez_sources [sources] [--filter NAME=VALUE]... [--evaluations N] [--threads N]
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -134,6 +135,7 @@ int main(int argc, char** argv) try {
   long long lab_seed = -1;
   bool align = false;
   double late_s = 0.0, drift_ppm = 0.0;
+  std::vector<std::pair<std::string, double>> fixed;
   std::size_t evaluations = 300;
   unsigned threads = 2;
   for (int i = 1; i < argc; ++i) {
@@ -151,6 +153,10 @@ int main(int argc, char** argv) try {
       late_s = std::stod(argv[++i]);
     } else if (a == "--reference-drift-ppm" && has_value) {
       drift_ppm = std::stod(argv[++i]);
+    } else if (a == "--filter" && has_value && std::string(argv[i + 1]).find('=') != std::string::npos) {
+      const std::string kv = argv[++i];
+      const auto eq = kv.find('=');
+      fixed.emplace_back(kv.substr(0, eq), std::stod(kv.substr(eq + 1)));
     } else if (a == "--evaluations" && has_value) {
       evaluations = std::stoul(argv[++i]);
     } else if (a == "--threads" && has_value) {
@@ -158,8 +164,8 @@ int main(int argc, char** argv) try {
     } else {
       std::fprintf(stderr,
                    "usage: bsn_bench_nez_sources [--hard-iron x,y,z] [--soft-iron xx,yy,zz,xy,xz,yz] [--lab SEED] "
-                   "[--align-reference] [--reference-late S] [--reference-drift-ppm P] [--evaluations N] "
-                   "[--threads N]\n");
+                   "[--align-reference] [--reference-late S] [--reference-drift-ppm P] [--filter NAME=VALUE]... "
+                   "[--evaluations N] [--threads N]\n");
       return 2;
     }
   }
@@ -180,6 +186,7 @@ int main(int argc, char** argv) try {
     if (align) align_reference_heading(rec.rec);
     eval::TuneSetup setup;
     setup.base = {"mekf", {{"preset", static_cast<double>(s + 1)}, {"mag_latency_s", 0.0}}};  // as bsn_bench_tune
+    setup.base.parameters.insert(setup.base.parameters.end(), fixed.begin(), fixed.end());
     setup.ranges = eval::default_param_ranges("mekf");
     setup.fit = {&rec};
     setup.threads = threads;
