@@ -20,8 +20,10 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"tau_mag_s", &P::tau_mag_s},
                                                {"acc_rejection_m_s2", &P::acc_rejection_m_s2},
                                                {"mag_norm_tolerance", &P::mag_norm_tolerance},
+                                               {"max_acc_error_rad", &P::max_acc_error_rad},
+                                               {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
                                            }),
-                                           rest_param_fields<P>(), timing_param_fields<P>());
+                                           bias_param_fields<P>(), rest_param_fields<P>(), timing_param_fields<P>());
 
 // Gain of a first-order low-pass with time constant tau for a step dt: exact for any dt.
 double step_gain(double dt, double inv_tau) { return 1.0 - std::exp(-dt * inv_tau); }
@@ -46,14 +48,20 @@ double atan2_over_y(double y, double x) {
 }  // namespace
 
 ComplementaryFilter::ComplementaryFilter(const Params& params)
-    : OrientationFilter(kName, params), params_(params), rest_(params) {
+    : OrientationFilter(kName, params), params_(params), rest_(params), bias_(params) {
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
   require_positive(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
   require_positive(kName, params.mag_norm_tolerance, "mag_norm_tolerance");
+  require_positive(kName, params.max_acc_error_rad, "max_acc_error_rad");
+  if (params.gyro_bias_lowpass != 0.0 && params.gyro_bias_lowpass != 1.0) {
+    throw std::invalid_argument(std::string(kName) + ": parameter gyro_bias_lowpass must be 0 or 1, got " +
+                                std::to_string(params.gyro_bias_lowpass));
+  }
   params.RestDetector::Params::check(kName);
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
+  coeff_.bias_lowpass = params.gyro_bias_lowpass != 0.0;
 }
 
 UpdateResult ComplementaryFilter::start(const ImuSample& s) {
@@ -79,10 +87,12 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   Quat q = state_.q;
 
   // Strapdown prediction: exact for a rate constant over the step (sensor-frame increment on the right).
-  if (s.has_gyr) q = q * exp_rotation_vector(s.gyr * dt);
+  // The bias estimate stays zero without the low-pass.
+  if (s.has_gyr) q = q * exp_rotation_vector((s.gyr - bias_.bias()) * dt);
 
   // Tilt correction: turn the earth-frame image of the measured up direction towards earth z, by the fraction
-  // gain_acc of the angle between them, about their common perpendicular.
+  // gain_acc of the angle between them (at most max_acc_error_rad after the start-up), about their common
+  // perpendicular.
   if (s.has_acc) {
     const double acc_norm = s.acc.norm();
     if (std::abs(acc_norm - kGravity) < params_.acc_rejection_m_s2) {
@@ -90,7 +100,11 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
       const Vec3 axis(up_est.y(), -up_est.x(), 0.0);  // up_est x earth z
       const double axis_squared_norm = axis.squaredNorm();
       if (axis_squared_norm > 1e-24) {
-        const double angle_over_sin = atan2_over_y(std::sqrt(axis_squared_norm), up_est.z());
+        const double sin_angle = std::sqrt(axis_squared_norm);
+        double angle_over_sin = atan2_over_y(sin_angle, up_est.z());
+        if (angle_over_sin * sin_angle > params_.max_acc_error_rad && !within_init_period(s.timestamp_ns)) {
+          angle_over_sin = params_.max_acc_error_rad / sin_angle;
+        }
         q = exp_rotation_vector((state_.gain_acc * angle_over_sin) * axis) * q;
       }
     }
@@ -115,6 +129,7 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   }
   state_.q.coeffs() = q.coeffs() * inverse_sqrt_near_one(q.coeffs().squaredNorm());
 
+  if (s.has_gyr && coeff_.bias_lowpass) bias_.update(s.timestamp_ns, dt, s.gyr);
   state_.flags.resting = rest_.update(s);
   state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;

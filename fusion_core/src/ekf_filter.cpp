@@ -30,6 +30,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"sigma_bg", &P::sigma_bg},
                                                {"sigma_a", &P::sigma_a},
                                                {"sigma_m", &P::sigma_m},
+                                               {"acc_variance_cap", &P::acc_variance_cap},
                                            }),
                                            kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
                                            timing_param_fields<P>(), rest_param_fields<P>());
@@ -73,12 +74,16 @@ EkfFilter::EkfFilter(const Params& params)
   require_positive(kName, params.sigma_bg, "sigma_bg");
   require_positive(kName, params.sigma_a, "sigma_a");
   require_positive(kName, params.sigma_m, "sigma_m");
+  if (!(params.acc_variance_cap >= 1.0) || !std::isfinite(params.acc_variance_cap)) {
+    throw std::invalid_argument("ekf: parameter acc_variance_cap must be finite and >= 1");
+  }
   params.KalmanInitParams::check(kName);
   params.RAdaptionFilterParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("ekf: max_gap_s must be <= 60 s");
   params.RestDetector::Params::check(kName);
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_m = params.sigma_m * params.sigma_m;
+  coeff_.var_a_max = params.acc_variance_cap * coeff_.var_a;
   rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
@@ -228,16 +233,19 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   }
   const bool use_acc = s.has_acc && s.acc.squaredNorm() > 1e-12;
   const Vec3 g_earth(0.0, 0.0, kGravity);
+  // The accelerometer's variance counts the external acceleration its residual shows, up to the cap.
+  const Vec3 acc_residual = s.acc - kGravity * up;
+  const double var_a = use_acc ? std::min(coeff_.var_a + acc_residual.squaredNorm(), coeff_.var_a_max) : coeff_.var_a;
   if (use_acc && use_mag) {
     // One joint update: this is what couples the magnetometer into roll and pitch.
     Eigen::Matrix<double, 6, 1> r, var;
     Eigen::Matrix<double, 6, 4> h;
-    r.head<3>() = s.acc - kGravity * up;
+    r.head<3>() = acc_residual;
     r.tail<3>() = s.mag - to_sensor * state_.h_ref;
     h.topRows<3>() = rotate_to_sensor_jacobian(state_.q, g_earth);
     h.bottomRows<3>() = rotate_to_sensor_jacobian(state_.q, state_.h_ref);
     const double var_m = coeff_.var_m * mag_variance_factor;
-    var << coeff_.var_a, coeff_.var_a, coeff_.var_a, var_m, var_m, var_m;
+    var << var_a, var_a, var_a, var_m, var_m, var_m;
     correct<6>(r, h, var);
   } else if (use_acc || use_mag) {
     const Vec3 ref = use_acc ? g_earth : state_.h_ref;
@@ -246,7 +254,7 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
     const Vec3 r = meas - to_sensor * ref;
     const Quat q_before = state_.q;
     const Vec3 bias_before = state_.bias;
-    correct<3>(r, h, Vec3::Constant(use_acc ? coeff_.var_a : coeff_.var_m * mag_variance_factor));
+    correct<3>(r, h, Vec3::Constant(use_acc ? var_a : coeff_.var_m * mag_variance_factor));
     if (use_acc && s.has_mag && state_.flags.mag_rejected) {
       // The accelerometer cannot see a rotation about the vertical; what it turns there comes from correlations in
       // P, and with the magnetometer out nothing turns it back: under external accelerations the heading then

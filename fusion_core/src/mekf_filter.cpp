@@ -35,6 +35,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"intensity_hold_s", &P::intensity_hold_s},
                                                {"min_switch_interval_s", &P::min_switch_interval_s},
                                                {"switch_confirm_s", &P::switch_confirm_s},
+                                               {"immediate_up_switch", &P::immediate_up_switch},
                                                {"table_rate_hz", &P::table_rate_hz},
                                            }),
                                            kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
@@ -205,6 +206,9 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   require_non_negative(n, params.min_switch_interval_s, "min_switch_interval_s");
   require_non_negative(n, params.switch_confirm_s, "switch_confirm_s");
   require_non_negative(n, params.table_rate_hz, "table_rate_hz");
+  if (params.immediate_up_switch != 0.0 && params.immediate_up_switch != 1.0) {
+    throw std::invalid_argument(std::string(n) + ": parameter immediate_up_switch must be 0 or 1");
+  }
   if (!(params.static_gyr_rad_s < params.slow_gyr_rad_s && params.slow_gyr_rad_s < params.intermediate_gyr_rad_s &&
         params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
     throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
@@ -289,6 +293,14 @@ void MekfFilter::adapt(const ImuSample& s) {
   // would be locked in for min_switch_interval_s however intense the motion then becomes.
   if (candidate == state_.intensity) {
     state_.differing = false;
+    return;
+  }
+  if (candidate > state_.intensity && params_.immediate_up_switch != 0.0) {
+    // A looser set at once (see immediate_up_switch): it is never stiffer than the motion's own class.
+    state_.intensity = candidate;
+    state_.last_switch_ns = t;
+    state_.differing = false;
+    ++state_.switches;
     return;
   }
   if (!state_.differing) {

@@ -19,16 +19,16 @@ constexpr double kDeg = 180.0 / std::numbers::pi;
 // Measured 2026-12-02 with the defaults after issue 12's shared detector (mean total / inclination RMSE, deg; before
 // it in brackets).
 const std::map<std::string, double> kMeanTotalRmseBarDeg = {
-    {"complementary", 14.41},  // 13.09 / 9.64: no bias estimate; fails on the fast-translation trial
-    {"seel_ruppin", 2.28},     // 2.07 / 0.61 (2.21 / 0.61): the best (VQF: 2.51 / 0.61)
-    {"madgwick", 3.51},        // 3.19 / 1.67
-    {"madgwick6", 4.73},       // 4.30 / 1.15
-    {"iecf", 3.44},            // 3.13 / 1.92 (3.05 / 1.99)
-    {"iecf6", 5.16},           // 4.69 / 1.95
-    {"ekf", 2.64},             // 2.40 / 1.01 (3.08 / 1.05)
-    {"mekf", 3.23},            // 2.94 / 0.92 (3.85 / 1.17)
-    {"mekf_adaptive", 5.57},   // 5.06 / 1.21 (4.77 / 1.23): Table 3 sets within their Table 1 ranges, rate-scaled
-    {"dlkf", 5.67},            // 5.15 / 3.20 (5.81 / 3.20)
+    {"complementary", 4.37},  // 3.97 / 1.73 (13.09 / 9.64 before its rest bias low-pass and tilt clip)
+    {"seel_ruppin", 2.28},    // 2.07 / 0.61 (2.21 / 0.61): the best (VQF: 2.51 / 0.61)
+    {"madgwick", 3.51},       // 3.19 / 1.67
+    {"madgwick6", 4.73},      // 4.30 / 1.15
+    {"iecf", 3.44},           // 3.13 / 1.92 (3.05 / 1.99)
+    {"iecf6", 5.16},          // 4.69 / 1.95
+    {"ekf", 2.66},            // 2.42 / 1.05 (3.08 / 1.05; 2.40 / 1.01 before acc_variance_cap)
+    {"mekf", 3.23},           // 2.94 / 0.92 (3.85 / 1.17)
+    {"mekf_adaptive", 5.58},  // 5.07 / 1.03 (4.77 / 1.23; 5.06 / 1.21 before immediate_up_switch)
+    {"dlkf", 5.67},           // 5.15 / 3.20 (5.81 / 3.20)
 };
 
 // The best filter's figures (seel_ruppin, 2.07 / 0.61 deg), held at measured + 10 % (the project's target is

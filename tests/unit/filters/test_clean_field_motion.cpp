@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <initializer_list>
 #include <numbers>
 #include <ostream>
@@ -106,17 +107,17 @@ sim::ScenarioSpec fast_rotation() {
 // A free body carried back and forth by 1.5 m in 0.94 s each way along changing horizontal and vertical
 // directions (minimum jerk: peak acceleration 5.77 d / T^2 = 9.8 m/s^2, 1 g), a 1 s pause after each return, turning
 // slowly meanwhile (RMS 30 deg/s), after kRestS of rest.
-sim::ScenarioSpec translation() {
+sim::ScenarioSpec translation(std::uint64_t seed = 13) {
   sim::ScenarioSpec spec;
   spec.name = "translation, clean field";
   spec.duration_s = 60.0;
-  spec.seed = 13;
+  spec.seed = seed;
   sim::RandomMotion m;
   m.angular_rate_rms_rad_s = 30.0 * kDeg;
   m.min_frequency_hz = 0.1;
   m.max_frequency_hz = 0.5;
   m.active = {{kRestS - 1.0, 1e9, 1.0}};
-  m.seed = 13;
+  m.seed = seed;
   spec.free_motion.random = m;
   const Vec3 directions[] = {Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0.6, 0.6, 0.53), Vec3(-0.7, 0.3, 0.65)};
   constexpr double kDistance = 1.5, kDuration = 0.94, kPause = 1.0;
@@ -142,13 +143,16 @@ bool is_one_of(const FilterInfo& info, std::initializer_list<const char*> names)
 // Filters that still miss a bound of this file (issue 12 left open for them): the check is reported as skipped with
 // the measured figure, never as passed, and passes as soon as the bound holds. Translation: the magnetometer is
 // accepted throughout (as it should be: the field is clean); what leaks into the heading is the tilt error that 1 g
-// of external acceleration leaves in these filters (ekf, mekf: 2.3 deg RMS; complementary, no bias estimate: 6.2;
-// mekf_adaptive, whose stiff slow set is chosen between the moves: 8.1). Long rejection: mekf_adaptive 12.7 deg
-// against the bound of 12.6 (mekf passes since its accelerometer update leaves heading and bias alone while the
-// magnetometer is out).
+// of external acceleration leaves. mekf: 2.3 deg RMS, and 1.8 deg already without any translation (its fast set's
+// long tilt and heading time constants let the consumer gyro's scale errors through); the residual-scaled
+// accelerometer variance that brings ekf below the bound does not help it without a stiffer set, which costs BROAD.
+// Long rejection, over six seeds: ekf's heading collapses on seeds 15 and 16 (32 and 37 deg against 13 and 11 deg of
+// gyro-only drift; seed 13 alone passes): its accelerometer update keeps changing the horizontal bias, which the next
+// turn makes vertical. Leaving the bias alone while the magnetometer is out, as mekf does, fixes all six but costs
+// the tilt (inclination 1.7 -> 7.6 deg RMS here, Fan's E 2.15 -> 3.59 deg): not yet a fix.
 bool known_to_miss(const FilterInfo& info, const char* test) {
-  if (std::string(test) == "translation") return is_one_of(info, {"complementary", "ekf", "mekf", "mekf_adaptive"});
-  if (std::string(test) == "long rejection") return is_one_of(info, {"mekf_adaptive"});
+  if (std::string(test) == "translation") return is_one_of(info, {"mekf"});
+  if (std::string(test) == "long rejection") return is_one_of(info, {"ekf"});
   return false;
 }
 
@@ -205,36 +209,43 @@ TEST_P(CleanFieldMotion, TranslationKeepsTheHeading) {
 TEST_P(CleanFieldMotion, LongRejectionDegradesTheHeadingLikeGyroDrift) {
   const auto parameters = always_rejecting(GetParam());
   if (parameters.empty()) GTEST_SKIP() << GetParam().name << " never rejects the magnetometer";
-  const sim::ScenarioSpec spec = translation();
-  const RunFigures f = run(GetParam(), spec, parameters);
-  EXPECT_LT(f.mag_accepted_fraction, 0.01);  // the rejection was forced
-  sim::ScenarioRunner runner(spec, {}, false);
-  std::vector<sim::ScenarioSample> out;
-  Quat q = Quat::Identity();
-  bool started = false;
-  std::uint64_t last_ns = 0;
-  double worst = 0.0;
-  while (runner.next(out)) {
-    const sim::ScenarioSample& s = out.front();
-    if (!started) {
-      q = s.truth;
-      started = true;
-    } else {
-      q = (q * exp_rotation_vector(s.sample.gyr * (static_cast<double>(s.sample.timestamp_ns - last_ns) * 1e-9)))
-              .normalized();
+  // Six motion and noise realisations: a collapse through the bias shows on some and not on others (ekf: seeds 15
+  // and 16 over the bound by 17 and 24 deg, while seed 13 passes by 4.6 deg).
+  for (std::uint64_t seed = 13; seed <= 18; ++seed) {
+    const sim::ScenarioSpec spec = translation(seed);
+    const RunFigures f = run(GetParam(), spec, parameters);
+    EXPECT_LT(f.mag_accepted_fraction, 0.01) << "seed " << seed;  // the rejection was forced
+    sim::ScenarioRunner runner(spec, {}, false);
+    std::vector<sim::ScenarioSample> out;
+    Quat q = Quat::Identity();
+    bool started = false;
+    std::uint64_t last_ns = 0;
+    double worst = 0.0;
+    while (runner.next(out)) {
+      const sim::ScenarioSample& s = out.front();
+      if (!started) {
+        q = s.truth;
+        started = true;
+      } else {
+        q = (q * exp_rotation_vector(s.sample.gyr * (static_cast<double>(s.sample.timestamp_ns - last_ns) * 1e-9)))
+                .normalized();
+      }
+      last_ns = s.sample.timestamp_ns;
+      if (static_cast<double>(s.sample.timestamp_ns) * 1e-9 >= kStartupS) {
+        worst = std::max(worst, error_angles(q, s.truth).heading);
+      }
     }
-    last_ns = s.sample.timestamp_ns;
-    if (static_cast<double>(s.sample.timestamp_ns) * 1e-9 >= kStartupS) {
-      worst = std::max(worst, error_angles(q, s.truth).heading);
+    if (seed == 13) {
+      RecordProperty("max_heading_deg", std::to_string(f.max_heading_error / kDeg));
+      RecordProperty("gyro_integral_max_heading_deg", std::to_string(worst / kDeg));
     }
+    if (known_to_miss(GetParam(), "long rejection") && !(f.max_heading_error < worst + 2.0 * kDeg)) {
+      GTEST_SKIP() << "known to miss: heading error " << f.max_heading_error / kDeg << " deg, gyro integral "
+                   << worst / kDeg << " deg (seed " << seed << ")";
+    }
+    EXPECT_LT(f.max_heading_error, worst + 2.0 * kDeg)
+        << "seed " << seed << ": the gyro integral alone errs " << worst / kDeg << " deg";
   }
-  RecordProperty("max_heading_deg", std::to_string(f.max_heading_error / kDeg));
-  RecordProperty("gyro_integral_max_heading_deg", std::to_string(worst / kDeg));
-  if (known_to_miss(GetParam(), "long rejection") && !(f.max_heading_error < worst + 2.0 * kDeg)) {
-    GTEST_SKIP() << "known to miss: heading error " << f.max_heading_error / kDeg << " deg, gyro integral "
-                 << worst / kDeg << " deg";
-  }
-  EXPECT_LT(f.max_heading_error, worst + 2.0 * kDeg) << "the gyro integral alone errs " << worst / kDeg << " deg";
 }
 
 std::vector<FilterInfo> nine_d_filters() {

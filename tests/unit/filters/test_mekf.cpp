@@ -161,9 +161,31 @@ TEST(Mekf, ConsistentNeesOnLongSimulatedRuns) {
 }
 
 // Adaptive: static 20 s, then intermediate motion (5 rad/s) 20 s, then a chattering sequence that alternates static
-// and fast every 2 s for 40 s. The set follows the intensity where it is steady and never changes twice within 10 s.
+// and fast every 2 s for 40 s. The class of each sample of that sequence (-1: static, which may keep a looser set).
+int chattering_class(double t) {
+  if (t >= 20 && t < 40) return 2;
+  if (t >= 40 && static_cast<int>((t - 40) / 2) % 2 == 0) return 3;
+  return -1;
+}
+
+ImuSample chattering_sample(const Quat& q, std::uint64_t k) {
+  ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
+  const int c = chattering_class(0.01 * static_cast<double>(k));
+  if (c == 2) {
+    s.gyr = Vec3(0, 0, 5.0);  // 290 deg/s: intermediate
+  } else if (c == 3) {
+    s.gyr = Vec3(12.0, 0, 0);  // 690 deg/s and 4 g of external acceleration: fast
+    s.acc += Vec3(0, 40.0, 0);
+  }
+  return s;
+}
+
+// Nez's rule (immediate_up_switch = 0): the set follows the intensity where it is steady and never changes twice
+// within 10 s, in either direction.
 TEST(Mekf, AdaptiveSwitchesByIntensityNeverTwiceWithinTenSeconds) {
-  MekfFilter f(MekfFilter::Params{}, true);
+  MekfFilter::Params p;
+  p.immediate_up_switch = 0.0;
+  MekfFilter f(p, true);
   EXPECT_EQ(f.name(), "mekf_adaptive");
   const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
   std::vector<double> switch_times;
@@ -171,14 +193,7 @@ TEST(Mekf, AdaptiveSwitchesByIntensityNeverTwiceWithinTenSeconds) {
   int intensity_at_20s = -1, intensity_at_40s = -1;
   for (std::uint64_t k = 0; k <= 8000; ++k) {
     const double t = 0.01 * static_cast<double>(k);
-    ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
-    if (t >= 20 && t < 40) {
-      s.gyr = Vec3(0, 0, 5.0);  // 290 deg/s: intermediate
-    } else if (t >= 40 && static_cast<int>((t - 40) / 2) % 2 == 0) {
-      s.gyr = Vec3(12.0, 0, 0);  // 690 deg/s and 4 g of external acceleration: fast
-      s.acc += Vec3(0, 40.0, 0);
-    }
-    f.update(s);
+    f.update(chattering_sample(q, k));
     if (f.state().switches != last_switches) {
       switch_times.push_back(t);
       last_switches = f.state().switches;
@@ -194,29 +209,60 @@ TEST(Mekf, AdaptiveSwitchesByIntensityNeverTwiceWithinTenSeconds) {
   EXPECT_LE(switch_times.size(), 6u);
 }
 
-// Motion that starts gently and then becomes fast: the set is confirmed only after switch_confirm_s, on the highest
-// class seen meanwhile (fast), not on the first moving samples (slow), which would then be locked in for 10 s.
+// The default (immediate_up_switch = 1) on the same sequence: a set is never stiffer than the class of the sample it
+// is used on (a looser one is taken at once), while calming down still waits 10 s after any switch.
+TEST(Mekf, AdaptiveTakesALooserSetAtOnceAndCalmsDownOnlyAfterTenSeconds) {
+  MekfFilter f(MekfFilter::Params{}, true);
+  const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
+  int last_switches = 0, last_intensity = f.intensity(), downs = 0;
+  double last_switch_t = 0.0;
+  for (std::uint64_t k = 0; k <= 8000; ++k) {
+    const double t = 0.01 * static_cast<double>(k);
+    f.update(chattering_sample(q, k));
+    ASSERT_GE(f.intensity(), chattering_class(t)) << "at " << t << " s";
+    if (f.state().switches != last_switches) {
+      if (f.intensity() < last_intensity) {
+        EXPECT_GE(t - last_switch_t, 10.0 - 1e-9) << "down at " << t << " s";
+        ++downs;
+      }
+      last_switch_t = t;
+      last_switches = f.state().switches;
+      last_intensity = f.intensity();
+    }
+    if (k == 1999) {
+      EXPECT_EQ(f.intensity(), 0);  // static
+    }
+  }
+  EXPECT_GE(downs, 2);  // the chattering sequence is not locked into the fast set for good
+}
+
+// Motion that starts gently and then becomes fast, under Nez's rule (immediate_up_switch = 0): the set is confirmed
+// only after switch_confirm_s, on the highest class seen meanwhile (fast), not on the first moving samples (slow),
+// which would then be locked in for 10 s. With the default the fast set is taken in either case.
 TEST(Mekf, AdaptiveConfirmsASwitchOnTheHighestClassSeenAtMotionOnset) {
   for (const double confirm_s : {0.5, 0.0}) {
-    MekfFilter::Params p;
-    p.switch_confirm_s = confirm_s;
-    MekfFilter f(p, true);
-    const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
-    for (std::uint64_t k = 0; k <= 2100; ++k) {
-      const double t = 0.01 * static_cast<double>(k);
-      ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
-      if (t >= 20.0 && t < 20.2) {
-        s.gyr = Vec3(0, 0, 0.5);  // 29 deg/s: slow
-      } else if (t >= 20.2) {
-        s.gyr = Vec3(12.0, 0, 0);  // 690 deg/s and 4 g: fast
-        s.acc += Vec3(0, 40.0, 0);
+    for (const double immediate_up : {0.0, 1.0}) {
+      MekfFilter::Params p;
+      p.switch_confirm_s = confirm_s;
+      p.immediate_up_switch = immediate_up;
+      MekfFilter f(p, true);
+      const Quat q = from_yaw_pitch_roll({0.3, 0.1, 0.2});
+      for (std::uint64_t k = 0; k <= 2100; ++k) {
+        const double t = 0.01 * static_cast<double>(k);
+        ImuSample s = static_sample(q, at_ns(k * 10 * kMs));
+        if (t >= 20.0 && t < 20.2) {
+          s.gyr = Vec3(0, 0, 0.5);  // 29 deg/s: slow
+        } else if (t >= 20.2) {
+          s.gyr = Vec3(12.0, 0, 0);  // 690 deg/s and 4 g: fast
+          s.acc += Vec3(0, 40.0, 0);
+        }
+        f.update(s);
+        if (k == 1999) {
+          EXPECT_EQ(f.intensity(), 0) << confirm_s;  // static since the first switch at 10 s
+        }
       }
-      f.update(s);
-      if (k == 1999) {
-        EXPECT_EQ(f.intensity(), 0) << confirm_s;  // static since the first switch at 10 s
-      }
+      EXPECT_EQ(f.intensity(), confirm_s > 0.0 || immediate_up != 0.0 ? 3 : 1) << confirm_s << " " << immediate_up;
     }
-    EXPECT_EQ(f.intensity(), confirm_s > 0.0 ? 3 : 1) << confirm_s;
   }
 }
 
