@@ -54,10 +54,7 @@ ComplementaryFilter::ComplementaryFilter(const Params& params)
   require_positive(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
   require_positive(kName, params.mag_norm_tolerance, "mag_norm_tolerance");
   require_positive(kName, params.max_acc_error_rad, "max_acc_error_rad");
-  if (params.gyro_bias_lowpass != 0.0 && params.gyro_bias_lowpass != 1.0) {
-    throw std::invalid_argument(std::string(kName) + ": parameter gyro_bias_lowpass must be 0 or 1, got " +
-                                std::to_string(params.gyro_bias_lowpass));
-  }
+  require_switch(kName, params.gyro_bias_lowpass, "gyro_bias_lowpass");
   params.RestDetector::Params::check(kName);
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;

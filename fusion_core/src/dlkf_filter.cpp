@@ -41,8 +41,6 @@ constexpr auto kParams =
                       }),
                       r_adaption_param_fields<P>(), timing_param_fields<P>(), rest_param_fields<P>());
 
-bool is_switch(double v) { return v == 0.0 || v == 1.0; }
-
 // Rotation matrix exp(-[w x] dt): an earth-fixed vector seen from a sensor turning at w.
 // Rodrigues: exp(-[v x]) = I - (sin a / a) [v x] + ((1 - cos a) / a^2) [v x]^2 with v = w dt, a = |v|.
 Mat3 sensor_frame_turn(const Vec3& w, double dt) {
@@ -153,7 +151,7 @@ DlkfFilter::DlkfFilter(const Params& params)
   require_positive(kName, params.sigma_m, "sigma_m");
   require_positive(kName, params.sigma_mag_disturbance, "sigma_mag_disturbance");
   require_positive(kName, params.tau_mag_disturbance_s, "tau_mag_disturbance_s");
-  if (!is_switch(params.gyro_bias_lowpass)) throw std::invalid_argument("dlkf: gyro_bias_lowpass must be 0 or 1");
+  require_switch(kName, params.gyro_bias_lowpass, "gyro_bias_lowpass");
   params.RAdaptionFilterParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("dlkf: max_gap_s must be <= 60 s");
   params.RestDetector::Params::check(kName);

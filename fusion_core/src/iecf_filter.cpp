@@ -21,13 +21,6 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                            bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
                                            rest_param_fields<P>(), timing_param_fields<P>());
 
-void require_switch(std::string_view name, double value, const char* param) {
-  if (value != 0.0 && value != 1.0) {
-    throw std::invalid_argument(std::string(name) + ": parameter " + param + " must be 0 or 1, got " +
-                                std::to_string(value));
-  }
-}
-
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.gain, "gain");
   require_positive(name, p.initial_gain, "initial_gain");

@@ -19,10 +19,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
 
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.beta, "beta");
-  if (p.gyro_bias_lowpass != 0.0 && p.gyro_bias_lowpass != 1.0) {
-    throw std::invalid_argument(std::string(name) + ": parameter gyro_bias_lowpass must be 0 or 1, got " +
-                                std::to_string(p.gyro_bias_lowpass));
-  }
+  require_switch(name, p.gyro_bias_lowpass, "gyro_bias_lowpass");
   return p;
 }
 }  // namespace

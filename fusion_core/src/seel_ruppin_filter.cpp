@@ -37,13 +37,8 @@ const P& checked(const P& p) {
   require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
   require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
   require_positive(kName, p.mag_reference_s, "mag_reference_s");
-  for (const auto& [value, name] :
-       {std::pair{p.mag_rejection, "mag_rejection"}, std::pair{p.rest_bias_lowpass, "rest_bias_lowpass"}}) {
-    if (value != 0.0 && value != 1.0) {
-      throw std::invalid_argument(std::string(kName) + ": parameter " + name + " must be 0 or 1, got " +
-                                  std::to_string(value));
-    }
-  }
+  require_switch(kName, p.mag_rejection, "mag_rejection");
+  require_switch(kName, p.rest_bias_lowpass, "rest_bias_lowpass");
   return p;
 }
 

@@ -63,6 +63,14 @@ inline void require_positive(std::string_view filter, double value, const char* 
   }
 }
 
+/// Throws std::invalid_argument unless value is 0 or 1 (an on/off parameter).
+inline void require_switch(std::string_view filter, double value, const char* name) {
+  if (value != 0.0 && value != 1.0) {
+    throw std::invalid_argument(std::string(filter) + ": parameter " + name + " must be 0 or 1, got " +
+                                std::to_string(value));
+  }
+}
+
 /// Throws std::invalid_argument unless value is finite and >= 0.
 inline void require_non_negative(std::string_view filter, double value, const char* name) {
   if (!(value >= 0.0) || value == std::numeric_limits<double>::infinity()) {

@@ -66,11 +66,7 @@ struct RAdaptionFilterParams : MagDisturbanceDetector::Params {
   const MagDisturbanceDetector::Params& thresholds() const { return *this; }
   /// Throws std::invalid_argument, naming `owner`, unless mag_rejection is 0 or 1 (the detector checks the
   /// thresholds).
-  void check(std::string_view owner) const {
-    if (mag_rejection != 0.0 && mag_rejection != 1.0) {
-      throw std::invalid_argument(std::string(owner) + ": parameter mag_rejection must be 0 or 1");
-    }
-  }
+  void check(std::string_view owner) const { require_switch(owner, mag_rejection, "mag_rejection"); }
 };
 
 /// The R-adaption parameters' entries of a filter's parameter table (P derives from RAdaptionFilterParams).
