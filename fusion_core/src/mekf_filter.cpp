@@ -206,9 +206,7 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   require_non_negative(n, params.min_switch_interval_s, "min_switch_interval_s");
   require_non_negative(n, params.switch_confirm_s, "switch_confirm_s");
   require_non_negative(n, params.table_rate_hz, "table_rate_hz");
-  if (params.immediate_up_switch != 0.0 && params.immediate_up_switch != 1.0) {
-    throw std::invalid_argument(std::string(n) + ": parameter immediate_up_switch must be 0 or 1");
-  }
+  require_switch(n, params.immediate_up_switch, "immediate_up_switch");
   if (!(params.static_gyr_rad_s < params.slow_gyr_rad_s && params.slow_gyr_rad_s < params.intermediate_gyr_rad_s &&
         params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
     throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
@@ -297,10 +295,7 @@ void MekfFilter::adapt(const ImuSample& s) {
   }
   if (candidate > state_.intensity && params_.immediate_up_switch != 0.0) {
     // A looser set at once (see immediate_up_switch): it is never stiffer than the motion's own class.
-    state_.intensity = candidate;
-    state_.last_switch_ns = t;
-    state_.differing = false;
-    ++state_.switches;
+    switch_set(candidate, t);
     return;
   }
   if (!state_.differing) {
@@ -311,25 +306,29 @@ void MekfFilter::adapt(const ImuSample& s) {
   state_.differing_max = std::max(state_.differing_max, candidate);
   if (t - state_.differing_since_ns >= coeff_.switch_confirm_ns &&
       t - state_.last_switch_ns >= coeff_.min_switch_interval_ns) {
-    state_.intensity = state_.differing_max;
-    state_.last_switch_ns = t;
-    // Entering the static or slow set (sigma_a = 0.2 m/s^2, identified on motion below 0.05 g): the bias
-    // covariance built up under the old set (under the static set's loose gyro the bias is not observable, so it
-    // keeps its initial variance) is inconsistent with the stiff new set, which would give the bias a large gain
-    // and let it absorb external acceleration (on BROAD up to several rad/s). It is capped at what the new set's
-    // random walk accumulates over one switch interval, by the congruence D P D (D scales the bias rows and
-    // columns), which keeps P positive definite.
-    const double sigma_bg = coeff_.sets[static_cast<std::size_t>(state_.intensity)].sigma_bg;
-    const double cap = sigma_bg * sigma_bg * coeff_.bias_cap_time_s;
-    const double largest = state_.p.bottomRightCorner<3, 3>().diagonal().maxCoeff();
-    if (state_.intensity <= static_cast<int>(MotionIntensity::kSlow) && largest > cap) {
-      const double d = std::sqrt(cap / largest);
-      state_.p.bottomRows<3>() *= d;
-      state_.p.rightCols<3>() *= d;
-    }
-    state_.differing = false;
-    ++state_.switches;
+    switch_set(state_.differing_max, t);
   }
+}
+
+void MekfFilter::switch_set(int intensity, std::uint64_t t) {
+  state_.intensity = intensity;
+  state_.last_switch_ns = t;
+  // Entering the static or slow set (sigma_a = 0.2 m/s^2, identified on motion below 0.05 g): the bias
+  // covariance built up under the old set (under the static set's loose gyro the bias is not observable, so it
+  // keeps its initial variance) is inconsistent with the stiff new set, which would give the bias a large gain
+  // and let it absorb external acceleration (on BROAD up to several rad/s). It is capped at what the new set's
+  // random walk accumulates over one switch interval, by the congruence D P D (D scales the bias rows and
+  // columns), which keeps P positive definite.
+  const double sigma_bg = coeff_.sets[static_cast<std::size_t>(state_.intensity)].sigma_bg;
+  const double cap = sigma_bg * sigma_bg * coeff_.bias_cap_time_s;
+  const double largest = state_.p.bottomRightCorner<3, 3>().diagonal().maxCoeff();
+  if (state_.intensity <= static_cast<int>(MotionIntensity::kSlow) && largest > cap) {
+    const double d = std::sqrt(cap / largest);
+    state_.p.bottomRows<3>() *= d;
+    state_.p.rightCols<3>() *= d;
+  }
+  state_.differing = false;
+  ++state_.switches;
 }
 
 void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n, bool keep_heading) {

@@ -194,6 +194,8 @@ class MekfFilter final : public OrientationFilter {
   void set_reference(const Vec3& mag_earth);
   int classify(const ImuSample& s) const;
   void adapt(const ImuSample& s);
+  /// Makes `intensity` the set in use at t (both switch rules end here).
+  void switch_set(int intensity, std::uint64_t t);
   void update_accelerometer(const Vec3& acc, const MekfNoise& n, bool keep_heading);
   void update_magnetometer(const ImuSample& s, const MekfNoise& n, double dt);
 
