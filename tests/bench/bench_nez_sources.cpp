@@ -184,11 +184,8 @@ int main(int argc, char** argv) try {
     eval::TuneRecording rec{scenarios[s], eval::simulate_recording(spec), {}};
     if (late_s != 0.0 || drift_ppm != 0.0) delay_reference(rec.rec, late_s, drift_ppm);
     if (align) align_reference_heading(rec.rec);
-    eval::TuneSetup setup;
-    setup.base = {"mekf", {{"preset", static_cast<double>(s + 1)}, {"mag_latency_s", 0.0}}};  // as bsn_bench_tune
+    eval::TuneSetup setup = eval::nez_mekf_setup(rec, s + 1);
     setup.base.parameters.insert(setup.base.parameters.end(), fixed.begin(), fixed.end());
-    setup.ranges = eval::default_param_ranges("mekf");
-    setup.fit = {&rec};
     setup.threads = threads;
     setup.options.max_evaluations = evaluations;
     const eval::TuneResult r = eval::tune(setup);

@@ -41,11 +41,7 @@ int main(int argc, char** argv) {
   for (int s = all ? 0 : 1; s < (all ? 3 : 2); ++s) {
     const sim::ScenarioSpec spec = sim::load_scenario(std::string(BSN_SCENARIO_DIR) + "/" + scenarios[s] + ".yaml");
     const eval::TuneRecording rec{scenarios[s], eval::simulate_recording(spec), {}};
-    eval::TuneSetup setup;
-    setup.base = {"mekf",
-                  {{"preset", static_cast<double>(preset_of[s])}, {"mag_latency_s", 0.0}}};  // no lag: as the test
-    setup.ranges = eval::default_param_ranges("mekf");
-    setup.fit = {&rec};
+    eval::TuneSetup setup = eval::nez_mekf_setup(rec, preset_of[s]);
     setup.threads = threads;
     const auto t0 = std::chrono::steady_clock::now();
     const eval::TuneResult r = eval::tune(setup);

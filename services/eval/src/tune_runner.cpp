@@ -97,6 +97,14 @@ std::vector<std::vector<double>> rmse_table(const fusion::FilterSpec& base, cons
   return table;
 }
 
+TuneSetup nez_mekf_setup(const TuneRecording& rec, int preset) {
+  TuneSetup setup;
+  setup.base = {"mekf", {{"preset", static_cast<double>(preset)}, {"mag_latency_s", 0.0}}};
+  setup.ranges = default_param_ranges("mekf");
+  setup.fit = {&rec};
+  return setup;
+}
+
 TuneResult tune(const TuneSetup& setup, const OptimiserProgress& progress) {
   check_param_ranges(setup.base, setup.ranges);
   if (setup.fit.empty()) throw std::invalid_argument("no recordings to identify the parameters on");

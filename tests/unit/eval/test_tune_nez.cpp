@@ -13,13 +13,7 @@ namespace {
 
 TuneResult identify(const char* name, const sim::ScenarioSpec& spec, int preset) {
   const TuneRecording rec{name, simulate_recording(spec), {}};
-  TuneSetup setup;
-  // The base is Table 3's set of the scenario's intensity (preset 1 slow, 2 intermediate, 3 fast). The filter is
-  // told the Opal-like magnetometer does not lag (mag_latency_s 0; the default brings each reading forward by a
-  // consumer part's lag, which on a sensor without lag is itself an error growing with the rate of turn).
-  setup.base = {"mekf", {{"preset", static_cast<double>(preset)}, {"mag_latency_s", 0.0}}};
-  setup.ranges = default_param_ranges("mekf");
-  setup.fit = {&rec};
+  TuneSetup setup = nez_mekf_setup(rec, preset);  // Table 3's set of the scenario's intensity, no magnetometer lag
   setup.options.max_evaluations = 300;
   TuneResult r = tune(setup);
   std::printf("%s: sigma_g %.3g sigma_bg %.3g sigma_a %.3g sigma_m %.3g, %.2f deg (Table 3: %.2f deg)\n", name,

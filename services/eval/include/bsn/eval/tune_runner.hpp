@@ -60,6 +60,12 @@ struct TuneResult {
   double base_fit_criterion = 0.0, base_held_out_criterion = 0.0;
 };
 
+/// The seed's experiment on a simulated Nez scenario (bsn_bench_tune, its test, bsn_bench_nez_sources): mekf's four
+/// sigmas identified on `rec` from Table 3's set of one intensity (preset 1 slow, 2 intermediate, 3 fast), the filter
+/// told that the Opal-like magnetometer does not lag (mag_latency_s 0: the default brings each reading forward by a
+/// consumer part's lag, which on a sensor without lag is itself an error growing with the rate of turn).
+TuneSetup nez_mekf_setup(const TuneRecording& rec, int preset);
+
 /// Identifies the ranges' parameters on setup.fit, then scores the result and the base on both sets. `progress`
 /// as in minimise(). Throws std::invalid_argument for bad ranges (check_param_ranges) or no fit recordings.
 TuneResult tune(const TuneSetup& setup, const OptimiserProgress& progress = {});
