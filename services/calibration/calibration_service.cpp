@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "bsn/config/body_config.hpp"
@@ -604,6 +605,17 @@ void CalibrationService::finish_alignment(Run& run, std::uint64_t now, const std
   } else {
     r.nodes.resize(nodes.size());
     for (auto& n : r.nodes) n.message = abort_reason;
+  }
+  if (abort_reason.empty()) {
+    // What the fit had: a failed alignment is explained by these (a pose found late, flexions cut short).
+    std::string samples;
+    for (std::size_t i = 0; i < nodes.size(); ++i)
+      samples += (i == 0 ? "" : ", ") + nodes[i].node + " " + std::to_string(run.alignment->samples(i));
+    char times[96];
+    std::snprintf(times, sizeof times, "N-pose %.2f..%.2f s, flexions to %.2f s", r.pose_start_s, r.pose_end_s,
+                  r.moves_end_s);
+    logging::log_info("request '", run.id, "': samples ", samples, "; ", r.paired_samples,
+                      " instants with every node; ", times, " after the first of them");
   }
   std::vector<std::pair<std::string, config::AlignmentRecord>> to_store;
   for (std::size_t i = 0; i < nodes.size(); ++i) {

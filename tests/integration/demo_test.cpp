@@ -33,11 +33,11 @@ TEST_F(DemoCommand, Demo) {
   const int kDomain = test_domain(7);
   const std::set<std::string> shm_before = directory_entries("/dev/shm");
 
-  auto& demo = spawn("demo", {"demo", "--duration", "20", "--domain", std::to_string(kDomain)});
+  auto& demo = spawn("demo", {"demo", "--duration", "26", "--domain", std::to_string(kDomain)});
   // While it runs, neither the demo nor its children (fusion, seven sims) may map or open anything in /dev/shm.
   std::set<std::string> shm_used;
   std::size_t most_children = 0;
-  const auto deadline = Clock::now() + 60s;  // 20 s of demo plus start-up and shutdown
+  const auto deadline = Clock::now() + 70s;  // 26 s of demo plus start-up and shutdown
   while (demo.running() && Clock::now() < deadline) {
     const std::vector<int> children = children_of(demo.pid());
     most_children = std::max(most_children, children.size());
@@ -46,7 +46,7 @@ TEST_F(DemoCommand, Demo) {
     std::this_thread::sleep_for(250ms);
   }
   const auto st = demo.wait_for(1s);
-  ASSERT_TRUE(st.has_value()) << "bsn demo --duration 20 still runs after 60 s";
+  ASSERT_TRUE(st.has_value()) << "bsn demo --duration 26 still runs after 70 s";
   EXPECT_TRUE(exited_cleanly(st)) << "bsn demo " << describe_status(st);
   EXPECT_EQ(most_children, 9u) << "child processes of the demo seen at once (fusion, calibration + 7 sims)";
   EXPECT_TRUE(shm_used.empty()) << "the demo's processes used shared memory: " << ::testing::PrintToString(shm_used);
