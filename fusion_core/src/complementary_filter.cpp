@@ -19,11 +19,12 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"tau_acc_s", &P::tau_acc_s},
                                                {"tau_mag_s", &P::tau_mag_s},
                                                {"acc_rejection_m_s2", &P::acc_rejection_m_s2},
-                                               {"mag_norm_tolerance", &P::mag_norm_tolerance},
+                                               {"mag_rejection", &P::mag_rejection},
                                                {"max_acc_error_rad", &P::max_acc_error_rad},
                                                {"gyro_bias_lowpass", &P::gyro_bias_lowpass},
                                            }),
-                                           bias_param_fields<P>(), rest_param_fields<P>(), timing_param_fields<P>());
+                                           bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
+                                           rest_param_fields<P>(), timing_param_fields<P>());
 
 // Gain of a first-order low-pass with time constant tau for a step dt: exact for any dt.
 double step_gain(double dt, double inv_tau) { return 1.0 - std::exp(-dt * inv_tau); }
@@ -48,11 +49,11 @@ double atan2_over_y(double y, double x) {
 }  // namespace
 
 ComplementaryFilter::ComplementaryFilter(const Params& params)
-    : OrientationFilter(kName, params), params_(params), rest_(params), bias_(params) {
+    : OrientationFilter(kName, params), params_(params), rest_(params), bias_(params), mag_detector_(params) {
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
-  require_positive(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
-  require_positive(kName, params.mag_norm_tolerance, "mag_norm_tolerance");
+  require_non_negative(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
+  require_switch(kName, params.mag_rejection, "mag_rejection");
   require_positive(kName, params.max_acc_error_rad, "max_acc_error_rad");
   require_switch(kName, params.gyro_bias_lowpass, "gyro_bias_lowpass");
   params.RestDetector::Params::check(kName);
@@ -67,9 +68,10 @@ UpdateResult ComplementaryFilter::start(const ImuSample& s) {
   if (!initial) return UpdateResult::kRejected;
   const bool mag_usable = initial->with_mag;
   state_.q = initial->q;
-  state_.mag_ref_norm = mag_usable ? s.mag.norm() : 0.0;
   state_.flags = start_flags(s.has_mag && !mag_usable);
   rest_.reset();
+  mag_detector_.reset();
+  if (mag_usable) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());  // the reference field
   return UpdateResult::kInitialised;
 }
 
@@ -92,7 +94,9 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   // perpendicular.
   if (s.has_acc) {
     const double acc_norm = s.acc.norm();
-    if (std::abs(acc_norm - kGravity) < params_.acc_rejection_m_s2) {
+    // A reading of (nearly) zero, free fall, has no direction to correct towards.
+    if (acc_norm > 1e-3 &&
+        (params_.acc_rejection_m_s2 == 0.0 || std::abs(acc_norm - kGravity) < params_.acc_rejection_m_s2)) {
       const Vec3 up_est = rotate(q, s.acc * (1.0 / acc_norm));
       const Vec3 axis(up_est.y(), -up_est.x(), 0.0);  // up_est x earth z
       const double axis_squared_norm = axis.squaredNorm();
@@ -110,18 +114,26 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   // Heading correction about earth z only, so the magnetometer never tilts the estimate.
   state_.flags.mag_rejected = false;
   if (s.has_mag) {
-    const double norm = s.mag.norm();
-    if (state_.mag_ref_norm <= 0.0 && norm > 1e-9) state_.mag_ref_norm = norm;
-    const Vec3 m_earth = rotate(q, s.mag);
+    const Vec3 mag = mag_at_gyro_time(s, bias_.bias(), params_.mag_latency_s);  // the magnetometer's own delay
+    const double norm = mag.norm();
+    const Vec3 m_earth = rotate(q, mag);
     const double horizontal_squared = m_earth.x() * m_earth.x() + m_earth.y() * m_earth.y();
-    const bool disturbed = std::abs(norm - state_.mag_ref_norm) > params_.mag_norm_tolerance * state_.mag_ref_norm;
+    double gain_factor = 1.0;
+    bool disturbed = false;
+    if (params_.mag_rejection != 0.0) {
+      const Vec3 up = earth_axis_in_sensor(q, 2);
+      const double horizontal_rate = s.has_gyr ? (s.gyr - bias_.bias()).cross(up).norm() : 0.0;
+      mag_detector_.update(s.timestamp_ns, mag, up, horizontal_rate, dt);
+      disturbed = !mag_detector_.usable();
+      gain_factor = mag_detector_.gain_factor();  // < 1 for a field used after a long rejection
+    }
     if (disturbed || horizontal_squared < 1e-12 * norm * norm || norm <= 1e-9) {
       state_.flags.mag_rejected = true;
     } else {
       // Angle that takes the horizontal field onto earth y (north): atan2(m_x, m_y).
       const double heading_error = m_earth.x() != 0.0 ? m_earth.x() * atan2_over_y(m_earth.x(), m_earth.y())
                                                       : std::atan2(m_earth.x(), m_earth.y());
-      q = exp_rotation_vector(Vec3(0.0, 0.0, state_.gain_mag * heading_error)) * q;
+      q = exp_rotation_vector(Vec3(0.0, 0.0, gain_factor * state_.gain_mag * heading_error)) * q;
     }
   }
   state_.q.coeffs() = q.coeffs() * inverse_sqrt_near_one(q.coeffs().squaredNorm());

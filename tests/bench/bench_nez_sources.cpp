@@ -14,11 +14,14 @@
 //   --reference-late S, --reference-drift-ppm P  the reference shows the truth S + P 1e-6 t seconds late (Nez App.
 //       A.1: 30 ppm, 18 ms after 10 min, before their correction).
 //   --filter NAME=VALUE  a further fixed MEKF parameter (e.g. mag_rejection=0: without the disturbance detector).
-// Usage: bsn_bench_nez_sources [sources] [--filter NAME=VALUE]... [--evaluations N] [--threads N]
+//   --write DIR  instead of identifying: write the three recordings as DIR/<scenario>.hdf5 (BROAD's layout), for
+//       `bsn eval DIR --filter all` (every filter on the same recordings).
+// Usage: bsn_bench_nez_sources [sources] [--filter NAME=VALUE]... [--evaluations N] [--threads N] [--write DIR]
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <numbers>
 #include <random>
 #include <sstream>
@@ -28,6 +31,7 @@
 
 #include "bsn/eval/tune_runner.hpp"
 #include "bsn/eval/tuning.hpp"
+#include "bsn/io/recording.hpp"
 #include "bsn/sim/scenario_file.hpp"
 
 namespace {
@@ -138,6 +142,7 @@ int main(int argc, char** argv) try {
   std::vector<std::pair<std::string, double>> fixed;
   std::size_t evaluations = 300;
   unsigned threads = 2;
+  std::string write_dir;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     const bool has_value = i + 1 < argc;
@@ -161,11 +166,13 @@ int main(int argc, char** argv) try {
       evaluations = std::stoul(argv[++i]);
     } else if (a == "--threads" && has_value) {
       threads = static_cast<unsigned>(std::stoul(argv[++i]));
+    } else if (a == "--write" && has_value) {
+      write_dir = argv[++i];
     } else {
       std::fprintf(stderr,
                    "usage: bsn_bench_nez_sources [--hard-iron x,y,z] [--soft-iron xx,yy,zz,xy,xz,yz] [--lab SEED] "
                    "[--align-reference] [--reference-late S] [--reference-drift-ppm P] [--filter NAME=VALUE]... "
-                   "[--evaluations N] [--threads N]\n");
+                   "[--evaluations N] [--threads N] [--write DIR]\n");
       return 2;
     }
   }
@@ -184,6 +191,13 @@ int main(int argc, char** argv) try {
     eval::TuneRecording rec{scenarios[s], eval::simulate_recording(spec), {}};
     if (late_s != 0.0 || drift_ppm != 0.0) delay_reference(rec.rec, late_s, drift_ppm);
     if (align) align_reference_heading(rec.rec);
+    if (!write_dir.empty()) {
+      std::filesystem::create_directories(write_dir);
+      const std::string path = write_dir + "/" + scenarios[s] + ".hdf5";
+      io::write_broad_hdf5(path, rec.rec);
+      std::printf("wrote %s\n", path.c_str());
+      continue;
+    }
     eval::TuneSetup setup = eval::nez_mekf_setup(rec, s + 1);
     setup.base.parameters.insert(setup.base.parameters.end(), fixed.begin(), fixed.end());
     setup.threads = threads;

@@ -36,7 +36,7 @@ TEST(StandardTests, GradesAreThoseOfFansTable5) {
 // detector whose thresholds sit at the edge of what B shows catches it on some seeds and not on others.
 TEST(StandardTests, FiltersThatRejectTheMagnetometerCatchTheDisturbancesOfBCAndEOnEverySeed) {
   std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
-  for (const char* name : {"seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"}) {
+  for (const char* name : {"complementary", "seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"}) {
     filters.emplace_back(name, fusion::FilterSpec{name, {}});
   }
   for (const std::optional<std::uint64_t> seed :

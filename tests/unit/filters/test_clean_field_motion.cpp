@@ -159,7 +159,7 @@ bool known_to_miss(const FilterInfo& info, const char* test) {
 // The filters whose rejection can be forced on by its thresholds, with those parameters (a band of 1e-6 that any
 // noise leaves; no new reference, no reduced-gain acceptance).
 std::vector<std::pair<std::string, double>> always_rejecting(const FilterInfo& info) {
-  if (is_one_of(info, {"seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"})) {
+  if (is_one_of(info, {"complementary", "seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"})) {
     return {{"mag_norm_enter", 1e-6},
             {"mag_norm_leave", 1e-6},
             {"mag_reference_tau_s", 1e6},

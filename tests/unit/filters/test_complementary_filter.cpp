@@ -74,8 +74,10 @@ TEST(ComplementaryFilter, DtComesFromTimestamps) {
   // Constant-rate rotation about a fixed axis sampled at 50 Hz and at 200 Hz: with exact readings both must
   // follow the truth, which a filter assuming a fixed rate could not.
   const Vec3 rate = Vec3(0.2, -0.5, 1.0);
+  ComplementaryFilter::Params exact;
+  exact.mag_latency_s = 0.0;  // exact samples: the magnetometer is in step with the gyro, nothing to bring forward
   for (double hz : {50.0, 200.0}) {
-    ComplementaryFilter f;
+    ComplementaryFilter f(exact);
     const auto step_ns = static_cast<std::uint64_t>(1e9 / hz);
     Quat truth = from_yaw_pitch_roll({0.3, 0.1, -0.2});
     for (std::uint64_t k = 0; k <= static_cast<std::uint64_t>(10 * hz); ++k) {
@@ -93,6 +95,7 @@ TEST(ComplementaryFilter, DtComesFromTimestamps) {
 TEST(ComplementaryFilter, ShortGapIsBridgedLongGapReinitialises) {
   ComplementaryFilter::Params p;
   p.max_gap_s = 1.0;
+  p.mag_latency_s = 0.0;  // exact samples: the magnetometer is in step with the gyro
   ComplementaryFilter f(p);
   const Vec3 rate(0, 0, 0.5);
   const Quat start = Quat::Identity();
@@ -124,7 +127,7 @@ TEST(ComplementaryFilter, WithoutMagnetometerHeadingFollowsTheGyroOnly) {
 }
 
 TEST(ComplementaryFilter, DisturbedFieldMagnitudeIsRejectedAndFlagged) {
-  ComplementaryFilter f;  // mag_norm_tolerance 20 %
+  ComplementaryFilter f;  // the shared detector: |m| band 10 % in, 7 % out
   const Quat q = from_yaw_pitch_roll({0.4, 0.1, 0.0});
   f.update(static_sample(q, at_ns(0)));
   for (std::uint64_t k = 1; k <= 300; ++k) {
@@ -133,7 +136,12 @@ TEST(ComplementaryFilter, DisturbedFieldMagnitudeIsRejectedAndFlagged) {
     EXPECT_TRUE(f.flags().mag_rejected);
   }
   EXPECT_LT(angle_between(f.orientation(), q), 1e-9);
-  f.update(static_sample(q, at_ns(301 * 10 * kMs)));
+  // Trusted again once the field has stayed inside the inner band for mag_min_clean_s (0.5 s), not before.
+  for (std::uint64_t k = 301; k <= 340; ++k) {
+    f.update(static_sample(q, at_ns(k * 10 * kMs)));
+    EXPECT_TRUE(f.flags().mag_rejected) << k;
+  }
+  for (std::uint64_t k = 341; k <= 400; ++k) f.update(static_sample(q, at_ns(k * 10 * kMs)));
   EXPECT_FALSE(f.flags().mag_rejected);
 }
 

@@ -1,5 +1,6 @@
 // Magnetic-disturbance detection on field magnitude and dip angle (Fan et al. 2018, sections 2.2.1 and 5.1), shared
-// by every filter that rejects the magnetometer (seel_ruppin, iecf, and through MagneticRAdaption ekf, mekf and dlkf).
+// by every filter that rejects the magnetometer (seel_ruppin, iecf, complementary, and through MagneticRAdaption ekf,
+// mekf and dlkf).
 // A ferromagnetic object changes |m| and the dip angle of the field. After Laidig & Seel's VQF (2023) both are
 // low-passed before they are judged (mag_lowpass_tau_s): the decision then rests on the field, not on one reading's
 // noise, so the thresholds can sit well below the disturbances to be caught and well above the noise (Fan's test B
@@ -114,10 +115,11 @@ class MagDisturbanceDetector {
     /// |w_h| (dt + mag_latency_s). Default 0.0064 s: the group delay 1 / (2 pi f_c) of a magnetometer averaging
     /// with a first-order corner f_c = 25 Hz (a part sampled at 100 Hz averages well below its 50 Hz Nyquist
     /// limit). The simulated case (1000 deg/s, one sample of lag, 25 Hz bandwidth) is accepted on >= 95 % with it.
-    /// seel_ruppin, iecf, ekf and mekf also bring each reading forward by this delay (lag_compensated) before they
-    /// use it: on the eight BROAD trials that took seel_ruppin 2.41 -> 2.07 deg, ekf 2.61 -> 2.40, mekf 3.15 ->
-    /// 2.94, iecf 3.21 -> 3.13 (dlkf 5.15 -> 5.45: it keeps its readings as they come). 0 = a magnetometer in step
-    /// with the gyro.
+    /// seel_ruppin, iecf, complementary, ekf and mekf also bring each reading forward by this delay
+    /// (lag_compensated) before they use it: on the eight BROAD trials that took seel_ruppin 2.41 -> 2.07 deg, ekf
+    /// 2.61 -> 2.40, mekf 3.15 -> 2.94, iecf 3.21 -> 3.13, complementary 2.63 -> 2.73 (trial 31, the stationary
+    /// magnet, 3.72 -> 4.51; kept for one model of the sensor across filters), dlkf 5.15 -> 5.45 (it keeps its
+    /// readings as they come). 0 = a magnetometer in step with the gyro.
     double mag_latency_s = 0.0064;
     /// A disturbance whose field stays the same for this long becomes the new reference field, s; 0 = never.
     /// Default 0 (off): a steady disturbed field cannot be told from a new earth field by |m| and the dip alone, and
