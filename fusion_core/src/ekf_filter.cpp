@@ -31,6 +31,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"sigma_a", &P::sigma_a},
                                                {"sigma_m", &P::sigma_m},
                                                {"acc_variance_cap", &P::acc_variance_cap},
+                                               {"rest_bias_update", &P::rest_bias_update},
                                            }),
                                            kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
                                            timing_param_fields<P>(), rest_param_fields<P>());
@@ -77,6 +78,7 @@ EkfFilter::EkfFilter(const Params& params)
   if (!(params.acc_variance_cap >= 1.0) || !std::isfinite(params.acc_variance_cap)) {
     throw std::invalid_argument("ekf: parameter acc_variance_cap must be finite and >= 1");
   }
+  require_switch(kName, params.rest_bias_update, "rest_bias_update");
   params.KalmanInitParams::check(kName);
   params.RAdaptionFilterParams::check(kName);
   if (params.max_gap_s > 60.0) throw std::invalid_argument("ekf: max_gap_s must be <= 60 s");
@@ -84,6 +86,7 @@ EkfFilter::EkfFilter(const Params& params)
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_m = params.sigma_m * params.sigma_m;
   coeff_.var_a_max = params.acc_variance_cap * coeff_.var_a;
+  coeff_.var_g_per_s = params.sigma_g * params.sigma_g;
   rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
 }
 
@@ -159,6 +162,15 @@ void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen
   state_.q = n > 1e-9 ? Quat(q(0) * inv_n, q(1) * inv_n, q(2) * inv_n, q(3) * inv_n) : state_.q;
 }
 
+void EkfFilter::learn_bias_at_rest(const Vec3& gyr, double dt) {
+  // At rest the reading is the bias plus the gyro's white noise of this step (see rest_bias_update).
+  const Eigen::Matrix<double, 7, 1> dx =
+      kalman_support::zero_rate_update<7>(state_.p, gyr - state_.bias, coeff_.var_g_per_s / dt);
+  state_.q.coeffs() += Eigen::Vector4d(dx(1), dx(2), dx(3), dx(0));  // Eigen stores (x, y, z, w)
+  state_.q = kalman_support::unit(state_.q);
+  state_.bias += dx.tail<3>();
+}
+
 UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   ImuSample s_fwd = s_in;
   s_fwd.mag = mag_at_gyro_time(s_in, state_.bias, params_.mag_latency_s);  // the magnetometer's own delay
@@ -199,6 +211,9 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
     state_.p.bottomLeftCorner<3, 4>() = top_right.transpose();
     state_.p.bottomRightCorner<3, 3>().diagonal().array() += params_.sigma_bg * params_.sigma_bg * dt;
   }
+
+  state_.flags.resting = rest_.update(s);
+  if (state_.flags.resting && params_.rest_bias_update != 0.0) learn_bias_at_rest(s.gyr, dt);
 
   // Magnetometer: usable unless the R-adaption sets its variance to infinity.
   bool use_mag = false;
@@ -286,7 +301,6 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   state_.p.bottomLeftCorner<3, 4>() = state_.p.topRightCorner<4, 3>().transpose();
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
 
-  state_.flags.resting = rest_.update(s);
   state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }

@@ -37,6 +37,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"switch_confirm_s", &P::switch_confirm_s},
                                                {"immediate_up_switch", &P::immediate_up_switch},
                                                {"table_rate_hz", &P::table_rate_hz},
+                                               {"rest_bias_update", &P::rest_bias_update},
                                            }),
                                            kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
                                            timing_param_fields<P>(), rest_param_fields<P>());
@@ -207,6 +208,7 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   require_non_negative(n, params.switch_confirm_s, "switch_confirm_s");
   require_non_negative(n, params.table_rate_hz, "table_rate_hz");
   require_switch(n, params.immediate_up_switch, "immediate_up_switch");
+  require_switch(n, params.rest_bias_update, "rest_bias_update");
   if (!(params.static_gyr_rad_s < params.slow_gyr_rad_s && params.slow_gyr_rad_s < params.intermediate_gyr_rad_s &&
         params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
     throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
@@ -459,6 +461,15 @@ UpdateResult MekfFilter::step(const ImuSample& s_in, double dt) {
   state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
   state_.p.bottomRightCorner<3, 3>().diagonal().array() += blocks.q22;
 
+  state_.flags.resting = rest_.update(s);
+  if (state_.flags.resting && params_.rest_bias_update != 0.0) {
+    // At rest the reading is the bias plus the set's gyro white noise of this step (see rest_bias_update).
+    const Eigen::Matrix<double, 6, 1> dx =
+        kalman_support::zero_rate_update<6>(state_.p, s.gyr - state_.bias, n.sigma_g * n.sigma_g / dt);
+    state_.q = state_.q * exp_rotation_vector(dx.head<3>());  // normalised at the end of update()
+    state_.bias += dx.tail<3>();
+  }
+
   // Update step 1: the accelerometer corrects attitude and bias.
   // The magnetometer's last decision (it is judged after this update): rejected means keep the heading.
   if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
@@ -482,7 +493,6 @@ UpdateResult MekfFilter::step(const ImuSample& s_in, double dt) {
     return UpdateResult::kRejected;
   }
   state_.q = kalman_support::unit(state_.q);
-  state_.flags.resting = rest_.update(s);
   state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }

@@ -26,10 +26,13 @@ const std::map<std::string, double> kMeanTotalRmseBarDeg = {
     {"madgwick6", 4.73},      // 4.30 / 1.15
     {"iecf", 3.44},           // 3.13 / 1.92 (3.05 / 1.99)
     {"iecf6", 5.16},          // 4.69 / 1.95
-    {"ekf", 2.66},            // 2.42 / 1.05 (3.08 / 1.05; 2.40 / 1.01 before acc_variance_cap)
-    {"mekf", 3.23},           // 2.94 / 0.92 (3.85 / 1.17)
-    {"mekf_adaptive", 5.58},  // 5.09 / 1.04 (4.77 / 1.23; 5.06 / 1.21 before immediate_up_switch)
-    {"dlkf", 5.67},           // 5.15 / 3.20 (5.81 / 3.20)
+    // ekf: 2.42 / 1.09 (3.08 / 1.05; 2.40 / 1.01 before acc_variance_cap; 2.42 / 1.05 before rest_bias_update)
+    {"ekf", 2.66},
+    {"mekf", 2.72},  // 2.47 / 0.94 (3.85 / 1.17; 2.94 / 0.92 before rest_bias_update)
+    // mekf_adaptive: 4.27 / 0.93 (4.77 / 1.23; 5.06 / 1.21 before immediate_up_switch; 5.09 / 1.04 before
+    // rest_bias_update)
+    {"mekf_adaptive", 4.70},
+    {"dlkf", 5.67},  // 5.15 / 3.20 (5.81 / 3.20)
 };
 
 // The best filter's figures (seel_ruppin, 2.07 / 0.61 deg), held at measured + 10 % (the project's target is

@@ -99,7 +99,7 @@ std::vector<std::vector<double>> rmse_table(const fusion::FilterSpec& base, cons
 
 TuneSetup nez_mekf_setup(const TuneRecording& rec, int preset) {
   TuneSetup setup;
-  setup.base = {"mekf", {{"preset", static_cast<double>(preset)}, {"mag_latency_s", 0.0}}};
+  setup.base = {"mekf", {{"preset", static_cast<double>(preset)}, {"mag_latency_s", 0.0}, {"rest_bias_update", 0.0}}};
   setup.ranges = default_param_ranges("mekf");
   setup.fit = {&rec};
   return setup;

@@ -63,7 +63,9 @@ struct TuneResult {
 /// The seed's experiment on a simulated Nez scenario (bsn_bench_tune, its test, bsn_bench_nez_sources): mekf's four
 /// sigmas identified on `rec` from Table 3's set of one intensity (preset 1 slow, 2 intermediate, 3 fast), the filter
 /// told that the Opal-like magnetometer does not lag (mag_latency_s 0: the default brings each reading forward by a
-/// consumer part's lag, which on a sensor without lag is itself an error growing with the rate of turn).
+/// consumer part's lag, which on a sensor without lag is itself an error growing with the rate of turn) and run as
+/// Nez's filter, without the zero-rate update at rest (rest_bias_update 0: the experiment identifies the paper's
+/// filter's sigmas, and that update gives the bias information the paper's filter does not have).
 TuneSetup nez_mekf_setup(const TuneRecording& rec, int preset);
 
 /// Identifies the ranges' parameters on setup.fit, then scores the result and the base on both sets. `progress`
