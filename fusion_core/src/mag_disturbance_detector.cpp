@@ -105,12 +105,7 @@ double MagDisturbanceDetector::last_dip_deviation() const {
   return std::abs(asin_clamped(state_.lp_down / state_.lp_norm) - asin_clamped(state_.ref_sin_dip));
 }
 
-void MagDisturbanceDetector::track_disturbance(std::uint64_t t_ns, double dt_s) {
-  state_.budget.update(dt_s, state_.disturbed, params_.mag_accept_after_s);
-  if (!state_.disturbed) {
-    state_.candidate = false;
-    return;
-  }
+void MagDisturbanceDetector::track_new_field(std::uint64_t t_ns) {
   // A field that stays the same (within the enter thresholds of the run's first reading) for mag_max_rejection_s
   // becomes the new reference; a field that keeps changing never does.
   const double norm = state_.lp_norm, dip = asin_clamped(state_.lp_down / state_.lp_norm);
@@ -188,7 +183,14 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
   } else if (state_.disturbed && state_.inside_leave_band && t_ns - state_.inside_since_ns >= min_clean_ns_) {
     state_.disturbed = false;
   }
-  track_disturbance(t_ns, dt_mag);
+  // The rules for a long disturbance (reduced gain, new field), here rather than in a call: a clean reading, nearly
+  // every one, only pays back the budget.
+  state_.budget.update(dt_mag, state_.disturbed, params_.mag_accept_after_s);
+  if (state_.disturbed) {
+    track_new_field(t_ns);
+  } else {
+    state_.candidate = false;
+  }
   if (!state_.disturbed && state_.inside_leave_band && dt_mag > 0.0) {
     // The reference follows the clean field: a running mean, then exponential with mag_reference_tau_s. The clean
     // readings are summed and taken in every kReferenceStepS (the reference moves by a fraction dt / tau per

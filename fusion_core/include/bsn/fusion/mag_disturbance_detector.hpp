@@ -207,8 +207,8 @@ class MagDisturbanceDetector {
   /// The reference from its magnitude and the sine of its dip, and the bands' bounds derived without trigonometry
   /// (what the clean field's following moves; the public setters also restart that averaging).
   void set_reference_bounds(double norm_uT, double sin_dip);
-  /// The rules for a long disturbance (new field, reduced gain) after the band decision of a reading.
-  void track_disturbance(std::uint64_t t_ns, double dt_s);
+  /// The new-field rule for a reading judged disturbed (after the band decision and the rejection budget).
+  void track_new_field(std::uint64_t t_ns);
 
   Params params_;
   std::uint64_t min_clean_ns_ = 0;
