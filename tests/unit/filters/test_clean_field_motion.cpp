@@ -141,6 +141,29 @@ bool is_one_of(const FilterInfo& info, std::initializer_list<const char*> names)
   return false;
 }
 
+// Plain strapdown integration of the raw gyro from the true start orientation: what is left when nothing corrects
+// the gyro (its full bias, scale and misalignment errors), the bound of the no-collapse cases below.
+class GyroIntegral {
+ public:
+  /// Advances to the sample (the first one sets the truth) and returns the integrated orientation.
+  const Quat& advance(const sim::ScenarioSample& s) {
+    if (!started_) {
+      q_ = s.truth;
+      started_ = true;
+    } else {
+      const double dt = static_cast<double>(s.sample.timestamp_ns - last_ns_) * 1e-9;
+      q_ = (q_ * exp_rotation_vector(s.sample.gyr * dt)).normalized();
+    }
+    last_ns_ = s.sample.timestamp_ns;
+    return q_;
+  }
+
+ private:
+  Quat q_ = Quat::Identity();
+  bool started_ = false;
+  std::uint64_t last_ns_ = 0;
+};
+
 // The filters whose rejection can be forced on by its thresholds, with those parameters (a band of 1e-6 that any
 // noise leaves; no new reference, no reduced-gain acceptance).
 std::vector<std::pair<std::string, double>> always_rejecting(const FilterInfo& info) {
@@ -202,20 +225,11 @@ TEST_P(CleanFieldMotion, LongRejectionDegradesTheHeadingLikeGyroDrift) {
     EXPECT_LT(f.mag_accepted_fraction, 0.01) << "seed " << seed;  // the rejection was forced
     sim::ScenarioRunner runner(spec, {}, false);
     std::vector<sim::ScenarioSample> out;
-    Quat q = Quat::Identity();
-    bool started = false;
-    std::uint64_t last_ns = 0;
+    GyroIntegral integral;
     double worst = 0.0;
     while (runner.next(out)) {
       const sim::ScenarioSample& s = out.front();
-      if (!started) {
-        q = s.truth;
-        started = true;
-      } else {
-        q = (q * exp_rotation_vector(s.sample.gyr * (static_cast<double>(s.sample.timestamp_ns - last_ns) * 1e-9)))
-                .normalized();
-      }
-      last_ns = s.sample.timestamp_ns;
+      const Quat& q = integral.advance(s);
       if (static_cast<double>(s.sample.timestamp_ns) * 1e-9 >= kStartupS) {
         worst = std::max(worst, error_angles(q, s.truth).heading);
       }
@@ -270,18 +284,15 @@ TEST_P(SustainedMotion, StrongAccelerationNeverTiltsWorseThanTheGyroIntegral) {
     auto filter = GetParam().make({GetParam().name, {}});
     sim::ScenarioRunner runner(spec, {}, false);
     std::vector<sim::ScenarioSample> out;
-    Quat integral = Quat::Identity();
-    std::uint64_t last_ns = 0;
+    GyroIntegral integral;
     double filter_sq = 0.0, integral_sq = 0.0, scored = 0.0;
     while (runner.next(out)) {
       const sim::ScenarioSample& s = out.front();
       filter->update(s.sample);
-      const double dt = static_cast<double>(s.sample.timestamp_ns - last_ns) * 1e-9;
-      integral = last_ns == 0 ? s.truth : (integral * exp_rotation_vector(s.sample.gyr * dt)).normalized();
-      last_ns = s.sample.timestamp_ns;
+      const Quat& q_integral = integral.advance(s);
       if (static_cast<double>(s.sample.timestamp_ns) * 1e-9 < 10.0) continue;
       filter_sq += std::pow(error_angles(filter->orientation(), s.truth).inclination, 2);
-      integral_sq += std::pow(error_angles(integral, s.truth).inclination, 2);
+      integral_sq += std::pow(error_angles(q_integral, s.truth).inclination, 2);
       scored += 1.0;
     }
     const double filter_rms = std::sqrt(filter_sq / scored), integral_rms = std::sqrt(integral_sq / scored);
