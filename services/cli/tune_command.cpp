@@ -270,14 +270,14 @@ int run_tune(const TuneOptions& opt) {
     } catch (const std::exception& e) {
       return fail(e.what());
     }
-    std::printf("\nmekf_adaptive with these sets (a class without a set keeps Nez Table 3):\n%s\n",
+    std::printf("\nmekf_adaptive with these sets (a class without a set keeps its default):\n%s\n",
                 filter_block(adaptive).c_str());
     for (int c = 0; c < 4; ++c) {
       const bool has_set = std::any_of(class_sets.begin(), class_sets.end(),
                                        [c](const eval::ClassSet& set) { return set.intensity == c; });
       if (!has_set) {
         std::printf(
-            "note: %s has no set and keeps Table 3's; with little of it in the recordings, consider the "
+            "note: %s has no set and keeps its default set; with little of it in the recordings, consider the "
             "nearest class's set for it (README, Tuning)\n",
             eval::intensity_name(c));
       }

@@ -309,8 +309,9 @@ TEST(Mekf, AdaptiveTakesASetPerClass) {
   const auto f = make_filter({"mekf_adaptive", {{"sigma_a_fast", 3.5}, {"sigma_m_fast", 20}, {"sigma_g_slow", 0.02}}});
   const auto& m = dynamic_cast<const MekfFilter&>(*f);
   for (std::size_t c = 0; c < 4; ++c) {
-    const MekfNoise want{c == 1 ? 0.02 : kNezTable3[c].sigma_g, kNezTable3[c].sigma_bg,
-                         c == 3 ? 3.5 : kNezTable3[c].sigma_a, c == 3 ? 20.0 : kNezTable3[c].sigma_m};
+    const MekfNoise want{c == 1 ? 0.02 : kAdaptiveDefaultSets[c].sigma_g, kAdaptiveDefaultSets[c].sigma_bg,
+                         c == 3 ? 3.5 : kAdaptiveDefaultSets[c].sigma_a,
+                         c == 3 ? 20.0 : kAdaptiveDefaultSets[c].sigma_m};
     EXPECT_EQ(m.sets()[c].sigma_g, want.sigma_g) << kIntensityNames[c];
     EXPECT_EQ(m.sets()[c].sigma_bg, want.sigma_bg) << kIntensityNames[c];
     EXPECT_EQ(m.sets()[c].sigma_a, want.sigma_a) << kIntensityNames[c];
