@@ -36,6 +36,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"min_switch_interval_s", &P::min_switch_interval_s},
                                                {"switch_confirm_s", &P::switch_confirm_s},
                                                {"immediate_up_switch", &P::immediate_up_switch},
+                                               {"intensity_from_residual", &P::intensity_from_residual},
                                                {"table_rate_hz", &P::table_rate_hz},
                                                {"rest_bias_update", &P::rest_bias_update},
                                            }),
@@ -208,6 +209,7 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   require_non_negative(n, params.switch_confirm_s, "switch_confirm_s");
   require_non_negative(n, params.table_rate_hz, "table_rate_hz");
   require_switch(n, params.immediate_up_switch, "immediate_up_switch");
+  require_switch(n, params.intensity_from_residual, "intensity_from_residual");
   require_switch(n, params.rest_bias_update, "rest_bias_update");
   if (!(params.static_gyr_rad_s < params.slow_gyr_rad_s && params.slow_gyr_rad_s < params.intermediate_gyr_rad_s &&
         params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
@@ -268,7 +270,10 @@ UpdateResult MekfFilter::start(const ImuSample& s) {
 }
 
 int MekfFilter::classify(const ImuSample& s) const {
-  const double ext = s.has_acc ? std::abs(s.acc.norm() - kGravity) : 0.0;
+  double ext = s.has_acc ? std::abs(s.acc.norm() - kGravity) : 0.0;
+  if (s.has_acc && params_.intensity_from_residual != 0.0) {
+    ext = std::max(ext, (s.acc - kGravity * earth_axis_in_sensor(state_.q, 2)).norm());
+  }
   const double rate = s.has_gyr ? (s.gyr - state_.bias).norm() : 0.0;
   auto level = [](double v, double t0, double t1, double t2) { return v < t0 ? 0 : v < t1 ? 1 : v < t2 ? 2 : 3; };
   return std::max(level(ext, params_.static_acc_m_s2, params_.slow_acc_m_s2, params_.intermediate_acc_m_s2),

@@ -31,7 +31,7 @@ const std::map<std::string, double> kMeanTotalRmseBarDeg = {
     // ekf: 2.42 / 1.09 (3.08 / 1.05; 2.40 / 1.01 before acc_variance_cap; 2.42 / 1.05 before rest_bias_update)
     {"ekf", 2.66},
     {"mekf", 2.72},  // 2.47 / 0.94 (3.85 / 1.17; 2.94 / 0.92 before rest_bias_update)
-    // mekf_adaptive: 2.44 / 0.93 (4.27 / 0.93 before its static set took the slow set's gyro error; 4.77 / 1.23;
+    // mekf_adaptive: 2.45 / 0.93 (4.27 / 0.93 before its static set took the slow set's gyro error; 4.77 / 1.23;
     // 5.06 / 1.21 before immediate_up_switch; 5.09 / 1.04 before rest_bias_update)
     {"mekf_adaptive", 2.68},
     {"dlkf", 5.23},  // 4.75 / 3.20 (5.15 / 3.20 with sigma_m 0.5 uT; 5.81 / 3.20)
