@@ -141,12 +141,15 @@ UpdateResult EkfFilter::start(const ImuSample& s) {
 
 template <int M>
 void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
-                        const Eigen::Matrix<double, M, 1>& variances) {
+                        const Eigen::Matrix<double, M, 1>& variances, bool hold_bias) {
   // R is diagonal, so the M rows are processed one at a time against the same linearisation: this is the batch
   // Kalman update exactly (up to rounding) without forming or inverting S. H = [h_q 0] touches only the
   // quaternion columns of P. Each row: P <- P - (P h^T)(P h^T)^T / s, symmetric by construction.
   using Vec7 = Eigen::Matrix<double, 7, 1>;
   Vec7 dx = Vec7::Zero();
+  // The gain and the q rows of P never read the bias block, so holding the bias is the plain update with the bias
+  // block of P put back and the bias step dropped: exactly the consider update with a zero bias gain.
+  const Mat3 p_bias = state_.p.bottomRightCorner<3, 3>();
   for (int i = 0; i < M; ++i) {
     const Eigen::Vector4d h = h_q.row(i).transpose();
     const Vec7 ph = state_.p.template leftCols<4>() * h;
@@ -156,7 +159,11 @@ void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen
     state_.p.noalias() -= k * ph.transpose();
   }
   const Eigen::Vector4d q = as_vector(state_.q) + dx.head<4>();
-  state_.bias += dx.tail<3>();
+  if (hold_bias) {
+    state_.p.bottomRightCorner<3, 3>() = p_bias;
+  } else {
+    state_.bias += dx.tail<3>();
+  }
   const double n = q.norm();
   const double inv_n = 1.0 / n;
   state_.q = n > 1e-9 ? Quat(q(0) * inv_n, q(1) * inv_n, q(2) * inv_n, q(3) * inv_n) : state_.q;
@@ -268,22 +275,22 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
     const Mat34 h = rotate_to_sensor_jacobian(state_.q, ref);
     const Vec3 r = meas - to_sensor * ref;
     const Quat q_before = state_.q;
-    const Vec3 bias_before = state_.bias;
-    correct<3>(r, h, Vec3::Constant(use_acc ? var_a : coeff_.var_m * mag_variance_factor));
-    if (use_acc && s.has_mag && state_.flags.mag_rejected) {
-      // The accelerometer cannot see a rotation about the vertical; what it turns there comes from correlations in
-      // P, and with the magnetometer out nothing turns it back: under external accelerations the heading then
-      // drifts far faster than the gyro would (simulated translation at 1 g: 26 deg against 10 deg of gyro-only
-      // drift). So while the magnetometer is rejected the correction keeps the tilt part only: the rotation about
-      // the vertical and the bias change along it are removed.
+    // The accelerometer cannot see a rotation about the vertical; what it turns there comes from correlations in
+    // P, and with the magnetometer out nothing turns it back: under external accelerations the heading then drifts
+    // far faster than the gyro would (simulated translation at 1 g: 26 deg against 10 deg of gyro-only drift). So
+    // while the magnetometer is rejected the correction keeps the tilt part only: the rotation about the vertical is
+    // removed. And it leaves the bias alone: the accelerometer alone under external acceleration teaches it wrong
+    // (started after 1 s of rest, at 1 g: up to 0.6 deg/s off, turned into the vertical as the body turns, 34 deg of
+    // heading against 13 deg of gyro-only drift), while a bias walks slowly (sigma_bg: 0.05 deg/s in a minute) and is
+    // learned again at rest (rest_bias_update) and once the magnetometer is back.
+    const bool accelerometer_alone = use_acc && s.has_mag && state_.flags.mag_rejected;
+    correct<3>(r, h, Vec3::Constant(use_acc ? var_a : coeff_.var_m * mag_variance_factor), accelerometer_alone);
+    if (accelerometer_alone) {
       const Quat d = q_before.conjugate() * state_.q;
       Vec3 turn = (d.w() >= 0.0 ? 2.0 : -2.0) * d.vec();  // the (small) correction as a rotation vector
       const Vec3 up_s = to_sensor.col(2);
       turn -= turn.dot(up_s) * up_s;
       state_.q = (q_before * exp_rotation_vector(turn)).normalized();
-      Vec3 db = state_.bias - bias_before;
-      db -= db.dot(up_s) * up_s;
-      state_.bias = bias_before + db;
     }
   } else {
     state_.q = kalman_support::unit(state_.q);

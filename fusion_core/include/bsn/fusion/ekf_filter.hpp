@@ -8,7 +8,8 @@
 // shared MagDisturbanceDetector): low-passed magnitude and dip, dip thresholds widened by the horizontal rate times the
 // magnetometer's lag, a steady new field adopted after 20 s, a reading used again at four times its variance after
 // 60 s of rejection, and while it is rejected an accelerometer-only update keeps its tilt part only (no turn about the
-// vertical, no bias change along it), so the heading degrades like the gyro's own drift, never faster. At rest the
+// vertical) and leaves the bias as it is (a Schmidt "consider" update), so the heading degrades like the gyro's own
+// drift, never faster. At rest the
 // gyro reading measures the bias directly (a zero-rate update, rest_bias_update; not in Fan).
 #pragma once
 
@@ -112,10 +113,12 @@ class EkfFilter final : public OrientationFilter {
   /// The zero-rate update of rest_bias_update, out of line: it runs at rest only, and inlined into step() it costs
   /// the update in motion instructions (ekf: +1.3 %).
   [[gnu::noinline]] void learn_bias_at_rest(const Vec3& gyr, double dt);
-  /// Kalman correction for a measurement whose Jacobian is [h_q 0]: it depends on the quaternion only.
+  /// Kalman correction for a measurement whose Jacobian is [h_q 0]: it depends on the quaternion only. With
+  /// hold_bias the bias is a "consider" state (Schmidt): its gain is zero, so the bias and its variance stay as
+  /// they are, while the quaternion's gain and covariance account for the bias's uncertainty.
   template <int M>
   void correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
-               const Eigen::Matrix<double, M, 1>& variances);
+               const Eigen::Matrix<double, M, 1>& variances, bool hold_bias = false);
 
   Params params_;
   Coefficients coeff_;
