@@ -229,7 +229,7 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
       (params_.acc_rejection_m_s2 == 0.0 || (acc2 >= coeff_.acc_accept_min2 && acc2 <= coeff_.acc_accept_max2))) {
     const Vec3 g_before = state_.gravity.vector();
     state_.gravity.correct(s.acc, coeff_.var_a);
-    if (!state_.have_mag || (params_.mag_rejection != 0.0 && r_adaption_.disturbed())) {
+    if (!state_.have_mag || r_adaption_.disturbed()) {  // (never disturbed with mag_rejection 0: never judged)
       // The correction turns the estimated gravity, i.e. the estimated orientation, so the field vector turns with
       // it while no magnetometer steers it. Left alone it would keep the gyro's tilt error that the accelerometer
       // just removed from gravity, and TRIAD would read that tilt error through the field's dip as heading: started

@@ -206,11 +206,6 @@ TEST_P(CleanFieldMotion, TranslationKeepsTheHeading) {
       << f.max_heading_error / kDeg << " deg, max inclination error " << f.max_inclination_error / kDeg << " deg";
 }
 
-// No heading collapse: with the magnetometer rejected throughout (forced by the thresholds), the heading may only
-// degrade as the gyro's own integral does. The reference is plain strapdown integration of the raw gyro from the
-// true start orientation: it carries the full bias, scale and misalignment errors; a filter may do better (bias
-// estimated at rest) but not worse than that plus 2 deg (what the tilt errors of 1 g accelerations leak into the
-// heading, see TranslationKeepsTheHeading).
 // The worst heading error of the gyro's own integral over the scored part of `spec` (from startup_s on).
 double gyro_integral_worst_heading(const sim::ScenarioSpec& spec, double startup_s) {
   sim::ScenarioRunner runner(spec, {}, false);
@@ -247,6 +242,11 @@ void expect_heading_within_the_gyro_integral(const FilterInfo& info, double rest
   }
 }
 
+// No heading collapse: with the magnetometer rejected throughout (forced by the thresholds), the heading may only
+// degrade as the gyro's own integral does. The reference is plain strapdown integration of the raw gyro from the
+// true start orientation: it carries the full bias, scale and misalignment errors; a filter may do better (bias
+// estimated at rest) but not worse than that plus 2 deg (what the tilt errors of 1 g accelerations leak into the
+// heading, see TranslationKeepsTheHeading).
 TEST_P(CleanFieldMotion, LongRejectionDegradesTheHeadingLikeGyroDrift) {
   if (always_rejecting(GetParam()).empty()) GTEST_SKIP() << GetParam().name << " never rejects the magnetometer";
   expect_heading_within_the_gyro_integral(GetParam(), kRestS);

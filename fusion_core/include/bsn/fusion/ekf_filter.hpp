@@ -9,8 +9,8 @@
 // magnetometer's lag, a steady new field adopted after 20 s, a reading used again at four times its variance after
 // 60 s of rejection, and while it is rejected an accelerometer-only update keeps its tilt part only (no turn about the
 // vertical) and leaves the bias as it is (a Schmidt "consider" update), so the heading degrades like the gyro's own
-// drift, never faster. At rest the
-// gyro reading measures the bias directly (a zero-rate update, rest_bias_update; not in Fan).
+// drift, never faster. At rest the gyro reading measures the bias directly (a zero-rate update, rest_bias_update; not
+// in Fan).
 #pragma once
 
 #include <Eigen/Core>
