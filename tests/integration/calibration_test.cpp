@@ -84,7 +84,24 @@ class CalibrationPeer {
     request_writer_ = participant_.make_writer(dds::kCalibrationRequestTopic);
   }
   bool wait_for_service(std::chrono::milliseconds timeout = std::chrono::seconds(15)) {
-    return wait_until([&] { return request_writer_->matched() > 0 && progress_reader_->matched() > 0; }, timeout);
+    if (!wait_until([&] { return request_writer_->matched() > 0 && progress_reader_->matched() > 0; }, timeout)) {
+      return false;
+    }
+    // Matched here does not mean the service's progress writer has matched this reader yet (discovery runs on each
+    // side on its own), and a volatile progress sample written before that is lost: refusals sent 20 ms after the
+    // service came up were (a CI rehearsal under load). A request the service must refuse, sent until its refusal
+    // arrives, proves the whole round trip.
+    auto last_probe = Clock::now() - std::chrono::seconds(1);
+    return wait_until(
+        [&] {
+          if (refusal("probe").has_value()) return true;
+          if (Clock::now() - last_probe > std::chrono::milliseconds(250)) {
+            send("probe", "probe", 1.0, 0, static_cast<bsn::CalibrationKind>(7));  // an unknown kind: refused
+            last_probe = Clock::now();
+          }
+          return false;
+        },
+        timeout);
   }
   void send(const std::string& id, const std::string& node, double duration_s, unsigned samples = 0,
             bsn::CalibrationKind kind = bsn::CALIBRATION_MAGNETOMETER, double field = 49.0) {
