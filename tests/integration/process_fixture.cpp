@@ -18,7 +18,7 @@ std::string bsn_executable() { return BSN_EXECUTABLE; }
 
 int test_domain(int offset) {
   constexpr int kDefaultBase = 20;
-  constexpr int kOffsets = 80;  // each run owns base .. base + 79
+  constexpr int kOffsets = 100;  // each run owns base .. base + 99
   int base = kDefaultBase;
   if (const char* env = std::getenv("BSN_TEST_DOMAIN_BASE")) {
     char* end = nullptr;
@@ -28,7 +28,7 @@ int test_domain(int offset) {
                                   std::to_string(232 - kOffsets + 1));
     base = static_cast<int>(v);
   }
-  if (offset < 0 || offset >= kOffsets) throw std::invalid_argument("test domain offset out of 0..79");
+  if (offset < 0 || offset >= kOffsets) throw std::invalid_argument("test domain offset out of 0..99");
   return base + offset;
 }
 

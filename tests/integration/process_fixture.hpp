@@ -25,7 +25,7 @@ using Clock = std::chrono::steady_clock;
 /// Path of the `bsn` program under test (set by CMake).
 std::string bsn_executable();
 
-/// The DDS domain id of test number `offset` (0..79): $BSN_TEST_DOMAIN_BASE (default 20) + offset. Two test runs
+/// The DDS domain id of test number `offset` (0..99): $BSN_TEST_DOMAIN_BASE (default 20) + offset. Two test runs
 /// on one machine use different bases so that they never see each other. Throws if the id leaves 0..232.
 int test_domain(int offset);
 
