@@ -1,4 +1,4 @@
-// bsn_bench_e2e: end-to-end DDS bench on one host (design.md section 5, "How we measure").
+// bsn_bench_e2e: end-to-end DDS bench on one host (docs/design.md section 5, "How we measure").
 //
 // The bench starts one real `bsn fusion` process per run with a generated body model of N segments (nodes
 // n0..n{N-1} on segments s0..s{N-1}, a chain by default) and plays all N sensor nodes itself: every 10 ms tick

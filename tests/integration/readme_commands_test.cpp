@@ -1,8 +1,9 @@
-// Every shell command of the README, run as a newcomer runs it: block by block in README order, each block's
-// commands in order in one bash (`set -euo pipefail`), in a scratch copy of the repository whose `build` is the
-// build under test, on this test's own DDS domain ($BSN_DOMAIN). A command that fails, or does not finish within
-// its time, fails the test naming its README line. Blocks opted out by a `readme-test: skip` marker, and commands
-// that need what this machine may not have (the BROAD recordings), are listed with their reasons.
+// Every shell command of the README and of the manual's pages in docs/ (in the order the README links them), run as
+// a newcomer runs it: block by block in order, each block's commands in order in one bash (`set -euo pipefail`), in a
+// scratch copy of the repository whose `build` is the build under test, on this test's own DDS domain ($BSN_DOMAIN).
+// A command that fails, or does not finish within its time, fails the test naming its file and line. Blocks opted
+// out by a `readme-test: skip` marker, and commands that need what this machine may not have (the BROAD
+// recordings), are listed with their reasons.
 #include <signal.h>
 #include <unistd.h>
 
@@ -174,7 +175,8 @@ class ReadmeCommands : public ProcessTest {
       }
       // One script per block. Before each command it writes the command's line to a progress file, so the test
       // knows which command runs, and for how long.
-      const std::string tag = "block-" + std::to_string(block.fence_line);
+      std::string tag = name + "-block-" + std::to_string(block.fence_line);
+      std::replace(tag.begin(), tag.end(), '/', '_');
       const fs::path progress = dir() / (tag + ".line");
       std::ostringstream script;
       script << "set -euo pipefail\n"
@@ -309,9 +311,23 @@ TEST_F(ReadmeCommands, EveryRunnableCommandWorksAsWritten) {
     fs::create_directory_symlink(broad, dir() / "shared" / "data" / "broad");
   }
 
+  // The README, then the manual's pages in the order the README links them (a page may use what an earlier one
+  // made); the run stops at the first file with a failing command.
+  const std::string readme = read_file(fs::path(BSN_SOURCE_DIR) / "README.md");
+  std::vector<std::string> files = {"README.md"};
+  for (const auto& page : readme::manual_pages(readme)) files.push_back(page);
   const std::set<std::string> shm_before = directory_entries("/dev/shm");
-  const RunReport report =
-      run_blocks(read_file(fs::path(BSN_SOURCE_DIR) / "README.md"), "README.md", repo, domain, broad, kCommandTimeout);
+  RunReport report;
+  for (const auto& file : files) {
+    const RunReport one = run_blocks(file == "README.md" ? readme : read_file(fs::path(BSN_SOURCE_DIR) / file), file,
+                                     repo, domain, broad, kCommandTimeout);
+    report.failures.insert(report.failures.end(), one.failures.begin(), one.failures.end());
+    report.not_run.insert(report.not_run.end(), one.not_run.begin(), one.not_run.end());
+    report.notes.insert(report.notes.end(), one.notes.begin(), one.notes.end());
+    report.blocks_run += one.blocks_run;
+    report.commands_run += one.commands_run;
+    if (!one.failures.empty()) break;
+  }
   remove_our_shm_leftovers(shm_before, domain);
 
   for (const auto& f : report.failures) ADD_FAILURE() << f;

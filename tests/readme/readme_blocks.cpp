@@ -1,5 +1,6 @@
 #include "readme_blocks.hpp"
 
+#include <algorithm>
 #include <cctype>
 #include <stdexcept>
 
@@ -289,6 +290,21 @@ std::vector<CodeBlock> extract_code_blocks(std::string_view markdown, std::strin
   }
   if (pending) fail(name, pending->first, "the readme-test marker is not followed by a code block");
   return blocks;
+}
+
+std::vector<std::string> manual_pages(std::string_view readme) {
+  std::vector<std::string> pages;
+  constexpr std::string_view kOpen = "](docs/";
+  for (std::size_t at = readme.find(kOpen); at != std::string_view::npos; at = readme.find(kOpen, at + 1)) {
+    const std::size_t start = at + 2;  // the "docs/" of the target
+    const std::size_t end = readme.find_first_of("#)", start);
+    if (end == std::string_view::npos) break;
+    const std::string page(readme.substr(start, end - start));
+    if (page.size() > 3 && page.compare(page.size() - 3, 3, ".md") == 0 &&
+        std::find(pages.begin(), pages.end(), page) == pages.end())
+      pages.push_back(page);
+  }
+  return pages;
 }
 
 }  // namespace bsn::readme

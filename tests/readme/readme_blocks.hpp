@@ -42,6 +42,11 @@ struct CodeBlock {
 /// trailing backslash at the end of a block or an unterminated here-document.
 std::vector<CodeBlock> extract_code_blocks(std::string_view markdown, std::string_view name = "README.md");
 
+/// The manual's pages the README links, in the order of their first link: every `docs/NAME.md` target of a
+/// Markdown link `](docs/NAME.md)` or `](docs/NAME.md#anchor)`, each once. The README-commands test runs the README's
+/// blocks and then each page's in this order, so a page's commands may use what the README's made.
+std::vector<std::string> manual_pages(std::string_view readme);
+
 /// The command without a trailing comment (`# ...` outside quotes, at the start or after a blank) and without
 /// surrounding blanks, for matching a command against a known one. Continuation lines are kept as written.
 std::string strip_comment(std::string_view command);

@@ -2,6 +2,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -188,35 +190,68 @@ TEST(ReadmeBlocks, StripCommentLeavesQuotedAndParameterHashes) {
   EXPECT_EQ(strip_comment("# only a comment"), "");
 }
 
-// The real README: every marker is well formed and placed, every shell block runs or says why not.
-TEST(ReadmeBlocks, TheReadmeParsesAndEveryOptOutHasItsReason) {
-  std::ifstream in(BSN_README);
-  ASSERT_TRUE(in) << "cannot read " << BSN_README;
+TEST(ReadmeBlocks, TheManualsPagesAreTheDocsLinksInTheirOrderEachOnce) {
+  const std::string md =
+      "see [a](docs/b.md#x), [c](docs/a.md) and [again](docs/b.md)\n"
+      "not a page: [d](docs/picture.png), [e](other/f.md), [g](#h)\n";
+  EXPECT_EQ(manual_pages(md), (std::vector<std::string>{"docs/b.md", "docs/a.md"}));
+}
+
+std::string read_text(const std::filesystem::path& path) {
+  std::ifstream in(path);
   std::stringstream text;
   text << in.rdbuf();
+  return text.str();
+}
+
+/// Checks one Markdown file's blocks; returns how many of them run.
+int check_blocks(const std::string& name, const std::string& text) {
   std::vector<CodeBlock> blocks;
-  ASSERT_NO_THROW(blocks = extract_code_blocks(text.str())) << "README.md has a malformed block or marker";
+  EXPECT_NO_THROW(blocks = extract_code_blocks(text, name)) << name << " has a malformed block or marker";
   int runnable = 0;
   for (const auto& b : blocks) {
     if (b.skip_reason) {
-      EXPECT_FALSE(b.skip_reason->empty()) << "README.md:" << b.fence_line;
+      EXPECT_FALSE(b.skip_reason->empty()) << name << ":" << b.fence_line;
     }
     // Commands hidden in a text block would escape the test: they belong in a sh block (with a marker if need be).
     if (!b.shell) {
       for (const auto& line : b.lines) {
         for (const char* command : {"./build/", "bsn ", "cmake ", "git ", "sudo ", "export "}) {
           EXPECT_NE(line.rfind(command, 0), 0u)
-              << "README.md:" << b.fence_line << ": a '" << b.language << "' block holds the shell command '" << line
+              << name << ":" << b.fence_line << ": a '" << b.language << "' block holds the shell command '" << line
               << "': make it a sh block (with a readme-test marker if it cannot run)";
         }
       }
     }
     if (b.runs()) {
-      EXPECT_FALSE(b.commands.empty()) << "README.md:" << b.fence_line << ": a shell block without a command";
+      EXPECT_FALSE(b.commands.empty()) << name << ":" << b.fence_line << ": a shell block without a command";
       ++runnable;
     }
   }
-  // The README's walkthroughs are shell blocks; none of them running would mean the markers took over.
+  return runnable;
+}
+
+// The real README and the manual's pages in docs/: every marker is well formed and placed, every shell block runs
+// or says why not, and every page of docs/ is linked from the README (the README test reaches a page only so).
+TEST(ReadmeBlocks, TheReadmeAndTheManualParseAndEveryOptOutHasItsReason) {
+  const std::filesystem::path readme(BSN_README);
+  const std::string text = read_text(readme);
+  ASSERT_FALSE(text.empty()) << "cannot read " << readme;
+  int runnable = check_blocks("README.md", text);
+  const std::vector<std::string> pages = manual_pages(text);
+  for (const auto& page : pages) {
+    const std::string page_text = read_text(readme.parent_path() / page);
+    EXPECT_FALSE(page_text.empty()) << "README.md links " << page << ", which is missing or empty";
+    runnable += check_blocks(page, page_text);
+  }
+  std::error_code ec;
+  for (const auto& e : std::filesystem::directory_iterator(readme.parent_path() / "docs", ec)) {
+    if (e.path().extension() != ".md") continue;
+    const std::string page = "docs/" + e.path().filename().string();
+    EXPECT_NE(std::find(pages.begin(), pages.end(), page), pages.end())
+        << page << " is not linked from README.md: the README test would never run its commands";
+  }
+  // The walkthroughs are shell blocks; none of them running would mean the markers took over.
   EXPECT_GE(runnable, 5);
 }
 

@@ -1,4 +1,4 @@
-// Every bsn topic, declared once (design.md section 3): its name, its IDL type (through the type support that
+// Every bsn topic, declared once (docs/design.md section 3): its name, its IDL type (through the type support that
 // fastddsgen generates for it) and how it is delivered. Writers and readers take all three from here, so they
 // always match; `bsn echo` (and recorders and bridges) iterate kAllTopics. Adding a topic is one constant and its
 // entry in kAllTopics.
