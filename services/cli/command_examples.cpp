@@ -67,7 +67,8 @@ const std::map<std::string, std::string>& examples() {
        "  bsn replay trial/imu.hdf5 --loop --node-map imu=pelvis\n"
        "Inputs: sessions from bsn record (.h5), BROAD-layout .hdf5, bsn eval .csv, or folders of them."},
       {"export",
-       "  bsn export walk.h5 --format sto --out walk/      OpenSim OpenSense orientations\n"
+       "  bsn export walk.h5 --format sto --out walk/      OpenSense orientations (segment frames), .mot angles\n"
+       "  bsn export walk.h5 --format sto --out walk/ --frames sensor --from 5 --to 35\n"
        "  bsn export walk.h5 --format csv --out walk/      one CSV per topic with units\n"
        "  bsn export walk.h5 --format broad --out walk/    per node, for bsn eval"},
       {"node",
