@@ -89,6 +89,7 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   services::DdsCommandFrame frame(opt.domain, "bsn sim " + opt.node);
   auto raw_writer = frame.participant().make_writer(dds::kRawTopic);
   auto truth_writer = frame.participant().make_writer(dds::kTruthOrientationTopic);
+  auto segment_truth_writer = frame.participant().make_writer(dds::kTruthSegmentOrientationTopic);
   logging::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
                     spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain,
                     " (raw samples from writer ", dds::writer_name(raw_writer->guid()), ")");
@@ -97,6 +98,7 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   bsn::Orientation truth;
   truth.segment(segment);
   truth.node_id(opt.node);
+  bsn::Orientation segment_truth = truth;
   // The joint to the segment's parent, if it has one: its true angles on bsn/truth/joint_angles.
   const SegmentDef& def = body.segment(*body.find(segment));
   std::unique_ptr<dds::Writer<bsn::JointAngles>> joint_writer;
@@ -135,6 +137,11 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
     truth.timestamp_ns(sensor_ns);
     dds::fill_orientation(s.truth, truth);
     truth_writer->write(truth);
+    // The same instant in the segment's ISB frame: the truth of an aligned estimate (FLAG_SEGMENT_FRAME).
+    segment_truth.timestamp_ns(sensor_ns);
+    dds::fill_orientation(s.segment_truth, segment_truth);
+    segment_truth.flags(bsn::FLAG_SEGMENT_FRAME);
+    segment_truth_writer->write(segment_truth);
     if (joint_writer && s.joint_relative) {
       joint.timestamp_ns(sensor_ns);
       joint.quat(dds::to_wxyz(*s.joint_relative));
@@ -202,7 +209,7 @@ int run_sim_node(const SimNodeOptions& opt) {
 }
 
 services::Command sim_command() {
-  return {"sim", "Simulated sensor node: publishes bsn/raw and bsn/truth/orientation", [](CLI::App* cmd) {
+  return {"sim", "Simulated sensor node: publishes bsn/raw and its truth (bsn/truth/*)", [](CLI::App* cmd) {
             auto opt = std::make_shared<SimNodeOptions>();
             cmd->add_option("--node", opt->node, "node id on bsn/raw (required unless --scenario with --out)");
             cmd->add_option("--segment", opt->segment, "segment name on bsn/truth/orientation (default: node id)");

@@ -5,7 +5,7 @@
 #   deploy/security/make-pki.sh [--submessages encrypt|sign|none] OUT_DIR [NAME:ROLE ...]
 #
 # ROLE is one of
-#   sensor       publishes bsn/raw (and bsn/truth/orientation and bsn/truth/joint_angles, for simulators)
+#   sensor       publishes bsn/raw (and bsn/truth/*: orientation, segment_orientation, joint_angles, for simulators)
 #   fusion       reads raw, calibration results and status; publishes orientation, joint angles, status
 #   calibration  reads raw and calibration requests; publishes calibration results and progress
 #   viewer       reads orientation, joint angles, status (and the simulator's truth): bsn view
@@ -43,14 +43,14 @@ command -v openssl >/dev/null || { echo "make-pki: error: openssl is not install
 # Topics each role may publish and subscribe to (DDS topic names; permissions list them literally).
 role_topics() {  # role -> "publish|subscribe", space-separated topic lists
   case $1 in
-    sensor)      echo "bsn/raw bsn/truth/orientation bsn/truth/joint_angles|" ;;
+    sensor)      echo "bsn/raw bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles|" ;;
     fusion)      echo "bsn/orientation bsn/joint_angles bsn/status|bsn/raw bsn/calibration/result bsn/status" ;;
     calibration) echo "bsn/calibration/result bsn/calibration/progress bsn/status|bsn/raw bsn/calibration/request" ;;
-    viewer)      echo "|bsn/orientation bsn/joint_angles bsn/status bsn/truth/orientation bsn/truth/joint_angles" ;;
+    viewer)      echo "|bsn/orientation bsn/joint_angles bsn/status bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles" ;;
     ros2-bridge) echo "rt/tf rt/bsn/*|bsn/raw bsn/orientation bsn/joint_angles" ;;
     operator)    echo "bsn/calibration/request|bsn/calibration/progress bsn/calibration/result bsn/status" ;;
     recorder)    echo "|bsn/*" ;;
-    tester)      echo "bsn/raw bsn/truth/orientation bsn/truth/joint_angles bsn/calibration/request|bsn/*" ;;
+    tester)      echo "bsn/raw bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles bsn/calibration/request|bsn/*" ;;
     *) return 1 ;;
   esac
 }

@@ -67,7 +67,8 @@ const std::map<std::string, std::string>& examples() {
        "  bsn replay trial/imu.hdf5 --loop --node-map imu=pelvis\n"
        "Inputs: sessions from bsn record (.h5), BROAD-layout .hdf5, bsn eval .csv, or folders of them."},
       {"export",
-       "  bsn export walk.h5 --format sto --out walk/      OpenSim OpenSense orientations\n"
+       "  bsn export walk.h5 --format sto --out walk/      OpenSense orientations (segment frames), .mot angles\n"
+       "  bsn export walk.h5 --format sto --out walk/ --frames sensor --from 5 --to 35\n"
        "  bsn export walk.h5 --format csv --out walk/      one CSV per topic with units\n"
        "  bsn export walk.h5 --format broad --out walk/    per node, for bsn eval"},
       {"node",
@@ -82,6 +83,9 @@ const std::map<std::string, std::string>& examples() {
       {"ros2-bridge",
        "  bsn ros2-bridge                            rt/bsn/<segment>/imu, rt/tf, rt/bsn/joint_states for ROS 2 tools\n"
        "  bsn ros2-bridge --domain 0                 ROS 2's default domain (ROS_DOMAIN_ID=0)"},
+      {"session",
+       "  bsn session sessions/lower_body_sim.yaml   the simulated lower body: align, record trials/walk.h5, export\n"
+       "Session files: sessions/*.yaml; bodies: bodies/*.yaml."},
       {"tune",
        "  bsn sim --scenario sim_publishers/scenarios/nez_slow.yaml --out slow/\n"
        "  bsn tune --filter mekf slow/imu.hdf5 --max-evaluations 60\n"

@@ -315,28 +315,48 @@ class FolderReaper {
   int write_fd_ = -1;
 };
 
+/// The shipped body file `name` (bodies/NAME in the repository, share/bsn/bodies/NAME when installed, or
+/// $BSN_BODIES_DIR/NAME), or "" if none of them has it.
+std::string shipped_body_file(const std::string& name) {
+  std::vector<std::filesystem::path> dirs;
+  if (const char* env = std::getenv("BSN_BODIES_DIR"); env && *env) dirs.emplace_back(env);
+  dirs.push_back(std::filesystem::path(dds::self_executable()).parent_path() / ".." / "share" / "bsn" / "bodies");
+  dirs.emplace_back(BSN_SOURCE_BODIES_DIR);
+  for (const auto& d : dirs) {
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(d / name, ec)) return (d / name).lexically_normal().string();
+  }
+  return "";
+}
+
 /// Starts one `bsn sim` per segment and one `bsn fusion`, shows the joint angles live, and stops them all.
 int run_demo(const DemoOptions& opt) {
-  fusion::BodyModel body;
-  try {
-    body = opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
-  } catch (const config::ConfigError& e) {
-    std::fprintf(stderr, "bsn demo: error: %s\n", e.what());
-    return 2;
-  }
   // The default body walks: every node publishes its segment of one scenario from one common start, so the body
   // moves as one; the calibration service aligns the sensors first. A body file of the user's (or --random) gives
   // each node its own random motion on the default mounting.
   const bool walking = opt.body_path.empty() && !opt.random;
-  // The walking body is aligned before it walks, so its knees and ankles, hinge-like, take the heading between
-  // their two segments from the hinge constraint (heading: kinematic), as a lab would: measured on this demo, the
-  // largest error of any of the three angles after the alignment went from 5.2 deg (left ankle's axial rotation,
-  // the two filters' heading difference) to 1.0 deg, and from 2.3 to 1.3 deg at the left knee.
+  // The walking body is the shipped lower body a lab starts from (bodies/lower_body.yaml): its knees and ankles,
+  // hinge-like, take the heading between their two segments from the hinge constraint (heading: kinematic) once
+  // aligned; measured on this demo, the largest error of any of the three angles after the alignment went from
+  // 5.2 deg (left ankle's axial rotation, the two filters' heading difference) to 1.0 deg, and from 2.3 to 1.3 deg at
+  // the left knee. --random keeps the default body (no alignment: the kinematic heading needs segment frames).
+  std::string body_file = opt.body_path;
   if (walking) {
-    for (fusion::SegmentSpec& s : body.segments) {
-      const fusion::JointType type = fusion::joint_convention(s).type;
-      if (type == fusion::JointType::kKnee || type == fusion::JointType::kAnkle) s.kinematic_heading.emplace();
+    body_file = shipped_body_file("lower_body.yaml");
+    if (body_file.empty()) {
+      std::fprintf(stderr,
+                   "bsn demo: error: the shipped body file lower_body.yaml is in none of $BSN_BODIES_DIR, "
+                   "share/bsn/bodies beside the program, %s\n",
+                   BSN_SOURCE_BODIES_DIR);
+      return 2;
     }
+  }
+  fusion::BodyModel body;
+  try {
+    body = body_file.empty() ? fusion::default_lower_body() : config::load_body_model(body_file);
+  } catch (const config::ConfigError& e) {
+    std::fprintf(stderr, "bsn demo: error: %s\n", e.what());
+    return 2;
   }
 
   dds::install_shutdown_handlers();
@@ -351,8 +371,10 @@ int run_demo(const DemoOptions& opt) {
   }
   const std::filesystem::path dir = dir_template;
   FolderReaper reaper(dir);  // before any DDS thread exists: it forks
-  const std::string body_file = (dir / "body.yaml").string();
-  std::ofstream(body_file) << config::body_model_to_yaml(body);
+  if (body_file.empty()) {   // --random without --body: the default lower body, as bsn fusion has it
+    body_file = (dir / "body.yaml").string();
+    std::ofstream(body_file) << config::body_model_to_yaml(body);
+  }
 
   const std::string self = dds::self_executable();
   const std::string domain = std::to_string(opt.domain);

@@ -41,16 +41,30 @@ void visit_fields(const bsn::JointAngles& s, FieldVisitor& v) {
   v.u64("timestamp_ns", "ns", s.timestamp_ns());
   v.f64("quat", "wxyz", s.quat().data(), 4);
   v.text("axes", s.axes());
-  v.f64("angles", "rad", s.angles().data(), 3);
+  // The axis-sequence angles by their place in the sequence and their axis: angle_1_z is the first rotation, about z.
+  // Labels from fixed tables and the sample's own strings: the recorder visits every sample, so nothing is allocated.
+  static const std::string kSequence[3][4] = {{"angle_1_x", "angle_1_y", "angle_1_z", "angle_1"},
+                                              {"angle_2_x", "angle_2_y", "angle_2_z", "angle_2"},
+                                              {"angle_3_x", "angle_3_y", "angle_3_z", "angle_3"}};
+  const std::string* sequence_labels[3];
+  for (std::size_t i = 0; i < 3; ++i) {
+    const char axis = i < s.axes().size() ? s.axes()[i] : '?';
+    sequence_labels[i] = &kSequence[i][axis == 'x' ? 0 : axis == 'y' ? 1 : axis == 'z' ? 2 : 3];
+  }
+  v.named_f64("angles", "rad", s.angles().data(), 3, sequence_labels);
   v.u32("flags", "bits", s.flags());
   v.text("anatomy", s.anatomy());
   v.text("side", s.side());
-  // Each named angle as its name and its value: fixed columns whatever the joint.
+  // Each named angle as its name and its value: fixed columns whatever the joint (in a file of one joint the value
+  // columns carry the angle's name).
   static constexpr const char* kNames[3] = {"anatomical_name_0", "anatomical_name_1", "anatomical_name_2"};
-  static constexpr const char* kValues[3] = {"anatomical_0", "anatomical_1", "anatomical_2"};
+  static const std::string kValues[3] = {"anatomical_0", "anatomical_1", "anatomical_2"};
+  static const std::string kEmpty;
   for (std::size_t i = 0; i < 3; ++i) {
-    v.text(kNames[i], i < s.anatomical_names().size() ? s.anatomical_names()[i] : std::string());
-    scalar(v, kValues[i], "rad", s.anatomical()[i]);
+    const std::string& name = i < s.anatomical_names().size() ? s.anatomical_names()[i] : kEmpty;
+    v.text(kNames[i], name);
+    const std::string* label = name.empty() ? &kValues[i] : &name;
+    v.named_f64(kValues[i].c_str(), "rad", &s.anatomical()[i], 1, &label);
   }
   scalar(v, "heading_offset", "rad", s.heading_offset());
   scalar(v, "heading_observability", "1", s.heading_observability());

@@ -22,6 +22,14 @@ class FieldVisitor {
   virtual void u32(const char* name, const char* unit, std::uint32_t value) = 0;
   /// `n` doubles (1 for a scalar; 3 for acc, written as acc_x, acc_y, acc_z in text outputs).
   virtual void f64(const char* name, const char* unit, const double* values, int n) = 0;
+  /// `n` doubles that have names of their own in this sample (`labels[i]`: a joint's anatomical angle names, or the
+  /// axis-sequence angles named by their axes in rotation order). Only files of one key use them (a CSV file per
+  /// joint); everything else sees f64 with `name`.
+  virtual void named_f64(const char* name, const char* unit, const double* values, int n,
+                         const std::string* const* labels) {
+    (void)labels;
+    f64(name, unit, values, n);
+  }
 };
 
 void visit_fields(const bsn::RawSample& s, FieldVisitor& v);
@@ -60,9 +68,11 @@ std::string key_of(const T& s) {
   }
 }
 
-/// One line of CSV (values only) or its header (names, with the unit in brackets: "acc_x [m/s^2]").
+/// One line of CSV (values only) or its header (names, with the unit in brackets: "acc_x [m/s^2]"). `named`: the
+/// columns that have names of their own in this sample get them ("flexion_extension [rad]", "angle_1_z [rad]"), for
+/// a file that holds one key only.
 template <class T>
-std::string csv_header(const T& s);
+std::string csv_header(const T& s, bool named = false);
 /// A CSV row; `prefix` columns (e.g. arrival time) come first, already formatted.
 template <class T>
 std::string csv_row(const T& s, const std::string& prefix = "");
@@ -74,6 +84,12 @@ std::string json_object(const T& s, const std::string& topic);
 class CsvHeaderVisitor : public FieldVisitor {
  public:
   std::string out;
+  bool named = false;
+  void named_f64(const char* name, const char* unit, const double* values, int n,
+                 const std::string* const* labels) override {
+    if (!named) return f64(name, unit, values, n);
+    for (int i = 0; i < n; ++i) add(labels[i]->c_str(), unit);
+  }
   void key(const char* name, const std::string&) override { add(name, ""); }
   void text(const char* name, const std::string&) override { add(name, ""); }
   void u64(const char* name, const char* unit, std::uint64_t) override { add(name, unit); }
@@ -116,8 +132,9 @@ class JsonVisitor : public FieldVisitor {
 };
 
 template <class T>
-std::string csv_header(const T& s) {
+std::string csv_header(const T& s, bool named) {
   CsvHeaderVisitor v;
+  v.named = named;
   visit_fields(s, v);
   return v.out;
 }

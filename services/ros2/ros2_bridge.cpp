@@ -49,6 +49,20 @@ std::string ros2_name(const std::string& name) {
   return out;
 }
 
+std::array<std::pair<std::string, double>, 3> ros2_joint_positions(const bsn::JointAngles& j) {
+  std::array<std::pair<std::string, double>, 3> out;
+  const bool named = !j.anatomy().empty() && j.anatomical_names().size() == 3;
+  for (std::size_t i = 0; i < 3; ++i) {
+    if (named) {
+      out[i] = {ros2_name(j.joint() + "_" + j.anatomical_names()[i]), j.anatomical()[i]};
+    } else {
+      const char axis = i < j.axes().size() ? j.axes()[i] : '_';
+      out[i] = {ros2_name(j.joint() + "_angle_" + std::to_string(i + 1) + "_" + std::string(1, axis)), j.angles()[i]};
+    }
+  }
+  return out;
+}
+
 Ros2Bridge::Ros2Bridge(dds::Participant& participant) : participant_(participant) {
   tf_writer_ = participant_.make_writer(dds::kRos2TfTopic);
   joint_state_writer_ = participant_.make_writer(dds::kRos2JointStatesTopic);
@@ -116,10 +130,19 @@ void Ros2Bridge::on_orientation(const bsn::Orientation& o) {
 
 void Ros2Bridge::on_joint(const bsn::JointAngles& j) {
   const auto& a = j.angles();
-  if (!finite(j.quat()) || !std::isfinite(a[0]) || !std::isfinite(a[1]) || !std::isfinite(a[2])) return;
+  const auto& n = j.anatomical();
+  if (!finite(j.quat()) || !std::isfinite(a[0]) || !std::isfinite(a[1]) || !std::isfinite(a[2]) ||
+      !std::isfinite(n[0]) || !std::isfinite(n[1]) || !std::isfinite(n[2]))
+    return;
+  const auto positions = ros2_joint_positions(j);
   std::lock_guard lock(mutex_);
   if (joints_.size() >= kMaxSegments && !joints_.count(j.joint())) return;
-  joints_[j.joint()] = {j.parent(), j.child(), j.axes(), j.quat(), a};
+  Joint& joint = joints_[j.joint()];
+  joint = {j.parent(), j.child(), j.axes(), j.quat(), a, {}, {}, j.timestamp_ns(), true};
+  for (std::size_t i = 0; i < 3; ++i) {
+    joint.names[i] = positions[i].first;
+    joint.positions[i] = positions[i].second;
+  }
   joints_fresh_ = true;
 }
 
@@ -141,8 +164,7 @@ void Ros2Bridge::tick() {
     s.imu = std::move(made.imu);
   }
   tf2_msgs::msg::dds_::TFMessage_ tf;
-  sensor_msgs::msg::dds_::JointState_ js;
-  bool joints_due = false;
+  std::vector<sensor_msgs::msg::dds_::JointState_> joint_states;
   {
     std::lock_guard lock(mutex_);
     const auto stamp = now_stamp();
@@ -175,20 +197,27 @@ void Ros2Bridge::tick() {
     }
     if (joints_fresh_) {
       joints_fresh_ = false;
-      joints_due = true;
-      js.header().stamp(stamp);
-      for (const auto& [name, j] : joints_) {
+      // One JointState per joint sample, stamped with its sensor time: the joints of a body are sampled at their
+      // own instants, and one stamp for all would be wrong for all but one.
+      for (auto& [name, j] : joints_) {
+        if (!j.fresh) continue;
+        j.fresh = false;
+        sensor_msgs::msg::dds_::JointState_ msg;
+        builtin_interfaces::msg::dds_::Time_ t;
+        t.sec(static_cast<std::int32_t>(j.timestamp_ns / 1'000'000'000ull));
+        t.nanosec(static_cast<std::uint32_t>(j.timestamp_ns % 1'000'000'000ull));
+        msg.header().stamp(t);
         for (std::size_t i = 0; i < 3; ++i) {
-          // One ROS joint per angle: "<joint>/<position in the sequence>_<axis>", e.g. knee_l/1_z.
-          const char axis = i < j.axes.size() ? j.axes[i] : '?';
-          js.name().push_back(ros2_name(name) + "/" + std::to_string(i + 1) + "_" + std::string(1, axis));
-          js.position().push_back(j.angles[i]);
+          msg.name().push_back(j.names[i]);
+          msg.position().push_back(j.positions[i]);
         }
+        joint_states.push_back(std::move(msg));
       }
     }
   }
   if (!tf.transforms().empty() && !tf_writer_->write(tf)) ++write_failures_;
-  if (joints_due && !joint_state_writer_->write(js)) ++write_failures_;
+  for (const auto& msg : joint_states)
+    if (!joint_state_writer_->write(msg)) ++write_failures_;
 }
 
 namespace {

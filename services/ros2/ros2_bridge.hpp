@@ -4,7 +4,8 @@
 //   linear acceleration from the raw sample it came from (bsn/raw, same node and timestamp);
 // - tf2_msgs/msg/TFMessage on rt/tf: the skeleton, world -> root segment (its orientation), parent -> child (the
 //   joint's relative quaternion from bsn/joint_angles), nominal link lengths;
-// - sensor_msgs/msg/JointState on rt/bsn/joint_states: the three angles of every joint.
+// - sensor_msgs/msg/JointState on rt/bsn/joint_states: per joint sample, the joint's three named anatomical angles
+//   (ISB signs, "<joint>_<angle name>", e.g. knee_l_flexion_extension), stamped with the sample's sensor time.
 #pragma once
 
 #include <array>
@@ -25,6 +26,11 @@ namespace bsn::services {
 /// The ROS 2 name of a bsn segment or joint: characters other than letters, digits and '_' become '_', and a
 /// leading digit gets an 's' before it (ROS 2 topic and frame name rules). At most 64 characters.
 std::string ros2_name(const std::string& name);
+
+/// The three JointState names and positions (rad) of a joint sample: "<joint>_<anatomical name>" with the named
+/// anatomical angles (ISB signs), or "<joint>_angle_<n>_<axis>" with the axis-sequence angles for a joint of no
+/// anatomy.
+std::array<std::pair<std::string, double>, 3> ros2_joint_positions(const bsn::JointAngles& j);
 
 /// Nominal length of a link in the TF skeleton, m (bsn's body model has no segment lengths).
 inline constexpr double kRos2LinkLength_m = 0.4;
@@ -57,6 +63,10 @@ class Ros2Bridge {
     std::string parent, child, axes;
     std::array<double, 4> quat{};
     std::array<double, 3> angles{};
+    std::array<std::string, 3> names;   ///< ROS joint names of `positions`
+    std::array<double, 3> positions{};  ///< the anatomical angles, rad (a joint of no anatomy: the axis sequence's)
+    std::uint64_t timestamp_ns = 0;     ///< sensor time of the sample
+    bool fresh = false;
   };
   void on_raw(const bsn::RawSample& raw);
   void on_orientation(const bsn::Orientation& o);

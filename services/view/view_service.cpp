@@ -87,6 +87,10 @@ int run_view(const ViewOptions& opt) {
       frame.participant().make_reader(dds::kTruthOrientationTopic, [&](const bsn::Orientation& t, const SampleInfo&) {
         pass_on([&] { return state.on_truth(t, monotonic_ns()); });
       });
+  auto segment_truth_reader = frame.participant().make_reader(
+      dds::kTruthSegmentOrientationTopic, [&](const bsn::Orientation& t, const SampleInfo&) {
+        pass_on([&] { return state.on_truth(t, monotonic_ns()); });
+      });
   auto joint_reader =
       frame.participant().make_reader(dds::kJointAnglesTopic, [&](const bsn::JointAngles& j, const SampleInfo&) {
         pass_on([&] { return state.on_joint(j, monotonic_ns()); });
@@ -115,6 +119,7 @@ int run_view(const ViewOptions& opt) {
   // Readers first (their callbacks broadcast), then the browsers.
   orientation_reader.reset();
   truth_reader.reset();
+  segment_truth_reader.reset();
   joint_reader.reset();
   status_reader.reset();
   server.reset();

@@ -63,7 +63,8 @@ std::optional<std::string> ViewState::on_truth(const bsn::Orientation& t, std::u
     return std::nullopt;
   }
   const std::string seg = t.segment().substr(0, kMaxNameChars);
-  auto* history = slot_for(truth_, seg);
+  const bool segment_frame = (t.flags() & bsn::FLAG_SEGMENT_FRAME) != 0;
+  auto* history = slot_for(segment_frame ? segment_truth_ : truth_, seg);
   auto* slot = slot_for(truth_msg_, seg);
   if (history == nullptr || slot == nullptr) {
     ++rejected_too_many_names_;
@@ -71,9 +72,14 @@ std::optional<std::string> ViewState::on_truth(const bsn::Orientation& t, std::u
   }
   history->emplace_back(t.timestamp_ns(), q);
   if (history->size() > kTruthHistory) history->pop_front();
+  // The ghost shows the truth of the frame the estimate is drawn in (the sensor's until an estimate says otherwise).
+  const auto estimate = estimate_in_segment_frame_.find(seg);
+  const bool shown_frame = estimate != estimate_in_segment_frame_.end() && estimate->second;
+  if (segment_frame != shown_frame) return std::nullopt;
   if (!due(*slot, now_ns)) return std::nullopt;
   slot->latest = "{\"k\":\"t\",\"seg\":" + json_string(seg) + ",\"ts\":" + std::to_string(t.timestamp_ns()) +
-                 ",\"q\":" + quat_json(q) + "}";
+                 ",\"q\":" + quat_json(q) +
+                 ",\"flags\":" + std::to_string(segment_frame ? bsn::FLAG_SEGMENT_FRAME : 0u) + "}";
   return slot->latest;
 }
 
@@ -85,13 +91,19 @@ std::optional<std::string> ViewState::on_orientation(const bsn::Orientation& o, 
   }
   const std::string seg = o.segment().substr(0, kMaxNameChars);
   auto* slot = slot_for(orientation_, seg);
-  if (slot == nullptr) {
+  auto* frame = slot_for(estimate_in_segment_frame_, seg);
+  if (slot == nullptr || frame == nullptr) {
     ++rejected_too_many_names_;
     return std::nullopt;
   }
+  const bool segment_frame = (o.flags() & bsn::FLAG_SEGMENT_FRAME) != 0;
+  *frame = segment_frame;
   if (!due(*slot, now_ns)) return std::nullopt;
+  // The error to the truth of the same sample in the same frame: an aligned estimate against the true segment
+  // frame, a sensor-frame one against the true sensor orientation.
   std::string err = "null";
-  if (auto it = truth_.find(seg); it != truth_.end()) {
+  const auto& truths = segment_frame ? segment_truth_ : truth_;
+  if (auto it = truths.find(seg); it != truths.end()) {
     for (const auto& [ts, tq] : it->second)
       if (ts == o.timestamp_ns()) err = number(rotation_angle_deg(q, tq), 6);
   }
@@ -103,7 +115,9 @@ std::optional<std::string> ViewState::on_orientation(const bsn::Orientation& o, 
 
 std::optional<std::string> ViewState::on_joint(const bsn::JointAngles& j, std::uint64_t now_ns) {
   const auto& a = j.angles();
-  if (!std::all_of(a.begin(), a.end(), [](double v) { return std::isfinite(v); })) {
+  const auto& n = j.anatomical();
+  if (!std::all_of(a.begin(), a.end(), [](double v) { return std::isfinite(v); }) ||
+      !std::all_of(n.begin(), n.end(), [](double v) { return std::isfinite(v); })) {
     ++rejected_non_finite_;
     return std::nullopt;
   }
@@ -113,10 +127,18 @@ std::optional<std::string> ViewState::on_joint(const bsn::JointAngles& j, std::u
     return std::nullopt;
   }
   if (!due(*slot, now_ns)) return std::nullopt;
+  const bool named = !j.anatomy().empty() && j.anatomical_names().size() == 3;
+  std::string names;
+  if (named)
+    names = name_of(j.anatomical_names()[0]) + "," + name_of(j.anatomical_names()[1]) + "," +
+            name_of(j.anatomical_names()[2]);
   slot->latest = "{\"k\":\"j\",\"joint\":" + name_of(j.joint()) + ",\"parent\":" + name_of(j.parent()) +
                  ",\"child\":" + name_of(j.child()) + ",\"axes\":" + name_of(j.axes()) +
                  ",\"ts\":" + std::to_string(j.timestamp_ns()) + ",\"deg\":[" + number(a[0] * kDeg) + "," +
-                 number(a[1] * kDeg) + "," + number(a[2] * kDeg) + "],\"flags\":" + std::to_string(j.flags()) + "}";
+                 number(a[1] * kDeg) + "," + number(a[2] * kDeg) + "],\"flags\":" + std::to_string(j.flags()) +
+                 ",\"anatomy\":" + name_of(named ? j.anatomy() : std::string()) + ",\"side\":" + name_of(j.side()) +
+                 ",\"names\":[" + names + "],\"anat\":[" + number(n[0] * kDeg) + "," + number(n[1] * kDeg) + "," +
+                 number(n[2] * kDeg) + "]}";
   return slot->latest;
 }
 

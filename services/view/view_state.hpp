@@ -3,9 +3,15 @@
 //
 // Messages (one JSON object each; the server sends them to a browser in arrays, one array per WebSocket frame):
 //   {"k":"o","seg":S,"node":N,"ts":NS,"q":[w,x,y,z],"flags":F,"err":DEG|null}  orientation (err: to the truth of
-//                                                                               the same sample, where known)
-//   {"k":"t","seg":S,"ts":NS,"q":[w,x,y,z]}                                     truth
-//   {"k":"j","joint":J,"parent":P,"child":C,"axes":A,"ts":NS,"deg":[a,b,c],"flags":F}  joint angles, degrees
+//                                                                               the same sample in the same frame,
+//                                                                               where known)
+//   {"k":"t","seg":S,"ts":NS,"q":[w,x,y,z],"flags":F}                           truth, in the frame of the segment's
+//                                                                               latest estimate (FLAG_SEGMENT_FRAME:
+//                                                                               the ISB segment frame, else the sensor)
+//   {"k":"j","joint":J,"parent":P,"child":C,"axes":A,"ts":NS,"deg":[a,b,c],"flags":F,
+//    "anatomy":T,"side":S,"names":[n1,n2,n3],"anat":[a,b,c]}                   joint angles, degrees: the axis
+//                                                                               sequence's, and the named anatomical
+//                                                                               ones (names [] without an anatomy)
 //   {"k":"s","process":P,"nodes":[{"node":N,"seg":S,"rate":HZ,"stale":B,"calib":ID},...]}  status
 // Orientations, truth and joint angles are passed on at most kMaxRateHz per segment (joint), on one fixed grid for
 // all, so that a 100 Hz source gives the full rate and the messages of all segments come together.
@@ -45,6 +51,8 @@ class ViewState {
   /// Each returns the message to send now, or nothing (rate limit, or a rejected sample). `now_ns`: a monotonic
   /// clock.
   std::optional<std::string> on_orientation(const bsn::Orientation& o, std::uint64_t now_ns);
+  /// A truth sample: bsn/truth/orientation (sensor frame) or bsn/truth/segment_orientation (FLAG_SEGMENT_FRAME).
+  /// Passed on only in the frame of the segment's latest estimate.
   std::optional<std::string> on_truth(const bsn::Orientation& t, std::uint64_t now_ns);
   std::optional<std::string> on_joint(const bsn::JointAngles& j, std::uint64_t now_ns);
   std::optional<std::string> on_status(const bsn::Status& s);
@@ -67,7 +75,10 @@ class ViewState {
 
   std::map<std::string, Limited> orientation_;
   std::map<std::string, Limited> truth_msg_;
-  std::map<std::string, std::deque<std::pair<std::uint64_t, std::array<double, 4>>>> truth_;
+  using TruthHistory = std::deque<std::pair<std::uint64_t, std::array<double, 4>>>;
+  std::map<std::string, TruthHistory> truth_;          ///< sensor frames
+  std::map<std::string, TruthHistory> segment_truth_;  ///< ISB segment frames
+  std::map<std::string, bool> estimate_in_segment_frame_;
   std::map<std::string, Limited> joint_;
   std::map<std::string, std::string> status_;
   std::uint64_t rejected_non_finite_ = 0;

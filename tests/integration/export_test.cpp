@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <numbers>
@@ -48,48 +49,58 @@ class Export : public ProcessTest {
 
 TEST_F(Export, StoHasOpenSenseLayoutAndReadsBackAsTheTruth) {
   const std::string session = record_session(19);
-  const std::string out = (dir() / "sto").string();
-  spawn("export", {"export", session, "--format", "sto", "--out", out});
-  ASSERT_EQ(exit_code(child("export").wait_for(30s)), 0) << read_file(log_path("export"));
-
-  const auto lines = lines_of(read_file(std::filesystem::path(out) / "truth_orientations.sto"));
-  ASSERT_GT(lines.size(), 150u);
-  // OpenSense's header: DataRate, DataType=Quaternion, version=3, OpenSimVersion, endheader; then the labels.
-  EXPECT_EQ(lines[0].rfind("DataRate=", 0), 0u);
-  EXPECT_NEAR(std::stod(lines[0].substr(9)), 100.0, 1.0);
-  EXPECT_EQ(lines[1], "DataType=Quaternion");
-  EXPECT_EQ(lines[2], "version=3");
-  EXPECT_EQ(lines[3].rfind("OpenSimVersion=", 0), 0u);
-  EXPECT_EQ(lines[4], "endheader");
-  EXPECT_EQ(lines[5], "time\timu_imu");
-
-  // The recorded truth, as the simulator published it.
   const io::SessionReader r(session);
-  const auto truth = r.streams_of("bsn/truth/orientation");
-  ASSERT_EQ(truth.size(), 1u);
-  const auto q = r.read_f64(truth[0], "quat", 4);
-  ASSERT_EQ(q.size() / 4, lines.size() - 6);
-  // Undo the ground-frame change (ENU z up -> OpenSim y up: -90 degrees about x) and compare every row.
-  const fusion::Quat to_opensim(std::cos(-std::numbers::pi / 4), std::sin(-std::numbers::pi / 4), 0.0, 0.0);
-  double worst = 0.0;
-  for (std::size_t i = 6; i < lines.size(); ++i) {
-    const auto cols = split(lines[i], '\t');
-    ASSERT_EQ(cols.size(), 2u) << lines[i];
-    const auto wxyz = split(cols[1], ',');  // scalar first, as OpenSense reads it
-    ASSERT_EQ(wxyz.size(), 4u) << lines[i];
-    const fusion::Quat read(std::stod(wxyz[0]), std::stod(wxyz[1]), std::stod(wxyz[2]), std::stod(wxyz[3]));
-    const std::size_t k = i - 6;
-    const fusion::Quat sim(q[4 * k], q[4 * k + 1], q[4 * k + 2], q[4 * k + 3]);
-    const fusion::Quat d = (to_opensim.conjugate() * read).conjugate() * sim;
-    worst = std::max(worst, 2.0 * std::atan2(d.vec().norm(), std::abs(d.w())));
+  // Each frame's file reads back as the truth the simulator published in that frame: the segment frames (the
+  // default) as bsn/truth/segment_orientation, the sensor frames as bsn/truth/orientation.
+  for (const auto& [frames, topic] : {std::pair<std::string, std::string>{"segment", "bsn/truth/segment_orientation"},
+                                      {"sensor", "bsn/truth/orientation"}}) {
+    const std::string out = (dir() / ("sto-" + frames)).string();
+    spawn("export-" + frames, {"export", session, "--format", "sto", "--out", out, "--frames", frames});
+    ASSERT_EQ(exit_code(child("export-" + frames).wait_for(30s)), 0) << read_file(log_path("export-" + frames));
+
+    const auto lines = lines_of(read_file(std::filesystem::path(out) / "truth_orientations.sto"));
+    ASSERT_GT(lines.size(), 150u);
+    // OpenSense's header: DataRate, DataType=Quaternion, version=3, OpenSimVersion, bsn's keys, endheader; then the
+    // labels.
+    EXPECT_EQ(lines[0].rfind("DataRate=", 0), 0u);
+    EXPECT_NEAR(std::stod(lines[0].substr(9)), 100.0, 1.0);
+    EXPECT_EQ(lines[1], "DataType=Quaternion");
+    EXPECT_EQ(lines[2], "version=3");
+    EXPECT_EQ(lines[3].rfind("OpenSimVersion=", 0), 0u);
+    const auto end = std::find(lines.begin(), lines.end(), "endheader");
+    ASSERT_NE(end, lines.end());
+    EXPECT_NE(std::find(lines.begin(), end, "bsn_frames=" + frames), end) << "the header names the file's frames";
+    const std::size_t first = static_cast<std::size_t>(end - lines.begin()) + 2;
+    EXPECT_EQ(lines[first - 1], "time\timu_imu");
+
+    // The recorded truth, as the simulator published it.
+    const auto truth = r.streams_of(topic);
+    ASSERT_EQ(truth.size(), 1u) << topic;
+    const auto q = r.read_f64(truth[0], "quat", 4);
+    ASSERT_EQ(q.size() / 4, lines.size() - first);
+    // Undo the ground-frame change (ENU z up -> OpenSim y up: -90 degrees about x) and compare every row.
+    const fusion::Quat to_opensim(std::cos(-std::numbers::pi / 4), std::sin(-std::numbers::pi / 4), 0.0, 0.0);
+    double worst = 0.0;
+    for (std::size_t i = first; i < lines.size(); ++i) {
+      const auto cols = split(lines[i], '\t');
+      ASSERT_EQ(cols.size(), 2u) << lines[i];
+      const auto wxyz = split(cols[1], ',');  // scalar first, as OpenSense reads it
+      ASSERT_EQ(wxyz.size(), 4u) << lines[i];
+      const fusion::Quat read(std::stod(wxyz[0]), std::stod(wxyz[1]), std::stod(wxyz[2]), std::stod(wxyz[3]));
+      const std::size_t k = i - first;
+      const fusion::Quat sim(q[4 * k], q[4 * k + 1], q[4 * k + 2], q[4 * k + 3]);
+      const fusion::Quat d = (to_opensim.conjugate() * read).conjugate() * sim;
+      worst = std::max(worst, 2.0 * std::atan2(d.vec().norm(), std::abs(d.w())));
+    }
+    EXPECT_LE(worst, 1e-6) << "rad";
+    // The ground frame is OpenSim's: the first sample's up axis (ENU z) is along OpenSim's +Y.
+    const auto first_row = split(split(lines[first], '\t')[1], ',');
+    const fusion::Quat q0(std::stod(first_row[0]), std::stod(first_row[1]), std::stod(first_row[2]),
+                          std::stod(first_row[3]));
+    const fusion::Quat sim0(q[0], q[1], q[2], q[3]);
+    const fusion::Vec3 up_local = sim0.conjugate() * fusion::Vec3::UnitZ();
+    EXPECT_NEAR((q0 * up_local - fusion::Vec3::UnitY()).norm(), 0.0, 1e-9);
   }
-  EXPECT_LE(worst, 1e-6) << "rad";
-  // The ground frame is OpenSim's: the first sample's up axis (ENU z) is along OpenSim's +Y.
-  const auto first = split(split(lines[6], '\t')[1], ',');
-  const fusion::Quat q0(std::stod(first[0]), std::stod(first[1]), std::stod(first[2]), std::stod(first[3]));
-  const fusion::Quat sim0(q[0], q[1], q[2], q[3]);
-  const fusion::Vec3 up_sensor = sim0.conjugate() * fusion::Vec3::UnitZ();
-  EXPECT_NEAR((q0 * up_sensor - fusion::Vec3::UnitY()).norm(), 0.0, 1e-9);
 }
 
 TEST_F(Export, CsvAndBroadFromOneSession) {

@@ -5,6 +5,7 @@
 #include <sys/socket.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <condition_variable>
@@ -21,6 +22,7 @@
 
 #include "bsn/dds/participant.hpp"
 #include "bsn/dds/topics.hpp"
+#include "bsn/fusion/rotation.hpp"
 #include "process_fixture.hpp"
 
 namespace bsn::integration {
@@ -242,7 +244,40 @@ TEST_F(ProcessTest, DemoWithViewPrintsTheUrlOfALiveView) {
   EXPECT_TRUE(exited_cleanly(status)) << describe_status(status) << "\n" << tail(log_path("demo"));
 }
 
-class ViewBrowser : public ProcessTest {};
+class ViewBrowser : public ProcessTest {
+ protected:
+  /// Starts headless Chromium on the view at `port` and connects `devtools` to its page, once the page has connected
+  /// to the view's WebSocket.
+  void open_page(int port, DevTools& devtools) {
+    const auto profile = dir() / "chromium";
+    spawn_command("chromium", {"/usr/bin/chromium", "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                               "--no-first-run", "--disable-background-networking", "--disable-component-update",
+                               "--disable-sync", "--user-data-dir=" + profile.string(), "--window-size=1280,900",
+                               "--remote-debugging-port=0", "http://127.0.0.1:" + std::to_string(port) + "/"});
+    // DevToolsActivePort: the port, then the browser's path.
+    int devtools_port = 0;
+    ASSERT_TRUE(wait_until(
+        [&] {
+          std::istringstream in(read_file(profile / "DevToolsActivePort"));
+          return static_cast<bool>(in >> devtools_port) && devtools_port > 0;
+        },
+        30s))
+        << tail(log_path("chromium"));
+    std::string page_path;
+    ASSERT_TRUE(wait_until(
+        [&] {
+          const std::string list = http_get(devtools_port, "/json/list");
+          const auto url = json_string_value(list, "webSocketDebuggerUrl");
+          const auto at = url.find("/devtools/page/");
+          if (at != std::string::npos) page_path = url.substr(at);
+          return !page_path.empty();
+        },
+        30s));
+    ASSERT_TRUE(devtools.connect(devtools_port, page_path));
+    // The page connects to the view's WebSocket.
+    ASSERT_TRUE(wait_until([&] { return devtools.eval("window.bsnView && bsnView.connected") == "true"; }, 30s));
+  }
+};
 
 TEST_F(ViewBrowser, PageShowsTheLiveBodyJointAnglesAndTruth) {
   if (!std::filesystem::exists("/usr/bin/chromium"))
@@ -255,7 +290,7 @@ TEST_F(ViewBrowser, PageShowsTheLiveBodyJointAnglesAndTruth) {
   auto joints = participant.make_reader(dds::kJointAnglesTopic, [&](const bsn::JointAngles& j, const SampleInfo&) {
     std::lock_guard lock(seen.mutex);
     auto& a = seen.joints[j.joint()][j.timestamp_ns()];
-    for (int i = 0; i < 3; ++i) a[i] = j.angles()[i] * 180.0 / std::numbers::pi;
+    for (int i = 0; i < 3; ++i) a[i] = j.anatomical()[i] * 180.0 / std::numbers::pi;  // the page's default
   });
   auto truth = participant.make_reader(dds::kTruthOrientationTopic, [&](const bsn::Orientation& o, const SampleInfo&) {
     std::lock_guard lock(seen.mutex);
@@ -268,35 +303,9 @@ TEST_F(ViewBrowser, PageShowsTheLiveBodyJointAnglesAndTruth) {
   int port = 0;
   ASSERT_TRUE(wait_until([&] { return (port = printed_port(log_path("view"))) > 0; }, 20s)) << tail(log_path("view"));
 
-  const auto profile = dir() / "chromium";
-  spawn_command("chromium", {"/usr/bin/chromium", "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-                             "--no-first-run", "--disable-background-networking", "--disable-component-update",
-                             "--disable-sync", "--user-data-dir=" + profile.string(), "--window-size=1280,900",
-                             "--remote-debugging-port=0", "http://127.0.0.1:" + std::to_string(port) + "/"});
-  // DevToolsActivePort: the port, then the browser's path.
-  int devtools_port = 0;
-  ASSERT_TRUE(wait_until(
-      [&] {
-        std::istringstream in(read_file(profile / "DevToolsActivePort"));
-        return static_cast<bool>(in >> devtools_port) && devtools_port > 0;
-      },
-      30s))
-      << tail(log_path("chromium"));
-  std::string page_path;
-  ASSERT_TRUE(wait_until(
-      [&] {
-        const std::string list = http_get(devtools_port, "/json/list");
-        const auto url = json_string_value(list, "webSocketDebuggerUrl");
-        const auto at = url.find("/devtools/page/");
-        if (at != std::string::npos) page_path = url.substr(at);
-        return !page_path.empty();
-      },
-      30s));
   DevTools devtools;
-  ASSERT_TRUE(devtools.connect(devtools_port, page_path));
-
-  // The page connects to the view's WebSocket.
-  ASSERT_TRUE(wait_until([&] { return devtools.eval("window.bsnView && bsnView.connected") == "true"; }, 30s));
+  open_page(port, devtools);
+  if (HasFatalFailure()) return;
 
   // Reads the page's summary once every joint and segment (and its truth ghost) is on it.
   auto summary = [&] {
@@ -328,8 +337,8 @@ TEST_F(ViewBrowser, PageShowsTheLiveBodyJointAnglesAndTruth) {
       std::string kind, name;
       l >> kind >> name;
       if (kind == "J") {
-        // The joint-angle values in the DOM are those of bsn/joint_angles for the same sample: within 0.1 degree
-        // (the table shows two decimals; 0.1 is the bound).
+        // The joint-angle values in the DOM are the named anatomical angles of bsn/joint_angles for the same sample:
+        // within 0.1 degree (the table shows two decimals).
         double ts = 0;
         std::array<double, 3> shown{};
         l >> ts >> shown[0] >> shown[1] >> shown[2];
@@ -380,6 +389,130 @@ TEST_F(ViewBrowser, PageShowsTheLiveBodyJointAnglesAndTruth) {
                     "lo = Math.min(d[i], d[i+1], d[i+2]); if (hi - lo > 40) n++; } return n; })()");
   // Three solids of 0.1-0.4 m at about 3.5 m cover thousands of pixels; 500 is far above noise and far below that.
   EXPECT_GT(std::atoi(coloured.c_str()), 500) << "coloured pixels in the 3D view: " << coloured;
+}
+
+// The demo's walking body, strapped on at random and aligned live by the calibration service: once aligned, every
+// segment is drawn as the segment (its ISB frame, the long axis Y along the limb) and compared with the truth of
+// its segment frame, the plots carry the named anatomical angles of bsn/joint_angles, and every node says "aligned".
+TEST_F(ViewBrowser, AnAlignedDemoBodyIsDrawnAsSegmentsAndFollowsItsTruth) {
+  if (!std::filesystem::exists("/usr/bin/chromium"))
+    GTEST_SKIP() << "Chromium is not installed (apt install chromium; deploy/setup.sh installs it)";
+  const int domain = test_domain(94);
+  Seen seen;
+  std::map<std::string, std::map<std::uint64_t, std::array<double, 4>>> segment_truth;
+  dds::Participant participant({domain, "view test"});
+  auto joints = participant.make_reader(dds::kJointAnglesTopic, [&](const bsn::JointAngles& j, const SampleInfo&) {
+    std::lock_guard lock(seen.mutex);
+    auto& a = seen.joints[j.joint()][j.timestamp_ns()];
+    for (int i = 0; i < 3; ++i) a[i] = j.anatomical()[i] * 180.0 / std::numbers::pi;
+  });
+  auto truth =
+      participant.make_reader(dds::kTruthSegmentOrientationTopic, [&](const bsn::Orientation& o, const SampleInfo&) {
+        std::lock_guard lock(seen.mutex);
+        segment_truth[o.segment()][o.timestamp_ns()] = o.quat();
+      });
+  spawn("demo", {"demo", "--view", "--view-port", "0", "--duration", "60", "--domain", std::to_string(domain)});
+  int port = 0;
+  const std::regex url("live 3D view at http://127\\.0\\.0\\.1:([0-9]+)/");
+  ASSERT_TRUE(wait_until(
+      [&] {
+        std::smatch m;
+        const std::string text = read_file(log_path("demo"));
+        if (std::regex_search(text, m, url)) port = std::stoi(m[1]);
+        return port > 0;
+      },
+      20s))
+      << tail(log_path("demo"));
+  DevTools devtools;
+  open_page(port, devtools);
+  if (HasFatalFailure()) return;
+
+  // The alignment arrives about 18 s after the demo's start (the N-pose and the flexions come first).
+  std::string text;
+  ASSERT_TRUE(wait_until(
+      [&] {
+        text = devtools.eval("bsnView.summary()");
+        int aligned = 0;
+        std::istringstream in(text);
+        for (std::string line; std::getline(in, line);)
+          aligned += line.rfind("S ", 0) == 0 && line.find("| frame segment |") != std::string::npos &&
+                     line.find("| truth_up none") == std::string::npos;
+        return aligned == 7;
+      },
+      60s))
+      << text << "\n"
+      << tail(log_path("demo"));
+  std::this_thread::sleep_for(2s);  // the ghosts and plots of the aligned frames, not the first samples after it
+
+  const auto y_axis = [](const std::array<double, 4>& q) {
+    return fusion::Quat(q[0], q[1], q[2], q[3]) * fusion::Vec3::UnitY();
+  };
+  for (int reading = 0; reading < 3; ++reading) {
+    if (reading > 0) std::this_thread::sleep_for(1s);
+    text = devtools.eval("bsnView.summary()");
+    std::lock_guard lock(seen.mutex);
+    std::istringstream in(text);
+    int segments = 0, joint_lines = 0;
+    for (std::string line; std::getline(in, line);) {
+      std::istringstream l(line);
+      std::string kind, name, bar;
+      l >> kind >> name;
+      if (kind == "S") {
+        // "S name ts w x y z | ts w x y z | err | frame F | up x y z | truth_up x y z"
+        double ts = 0, truth_ts = 0;
+        std::array<double, 4> solid{}, ghost{};
+        std::string err, frame_word, frame, up_word, truth_up_word;
+        fusion::Vec3 up, truth_up;
+        l >> ts >> solid[0] >> solid[1] >> solid[2] >> solid[3] >> bar >> truth_ts >> ghost[0] >> ghost[1] >>
+            ghost[2] >> ghost[3] >> bar >> err >> bar >> frame_word >> frame >> bar >> up_word >> up.x() >> up.y() >>
+            up.z() >> bar >> truth_up_word >> truth_up.x() >> truth_up.y() >> truth_up.z();
+        ASSERT_EQ(frame, "segment") << line;
+        // The error to the truth of its segment frame, as the page shows it: below 5 degrees (the alignment's bound
+        // per segment, SegmentAlignment.GaitAnglesFollowTheTruthAfterTheAlignmentOnly).
+        ASSERT_NE(err, "none") << line;
+        EXPECT_LT(std::stod(err), 5.0) << line;
+        // The drawn long axis is the segment's true long axis (ISB Y) at the sample drawn: within 5 degrees. A
+        // segment frame drawn as a sensor frame (the long axis along z) errs by 90.
+        const auto* t = at_time(segment_truth[name], ts);
+        ASSERT_NE(t, nullptr) << "truth of " << name << " at " << ts << " not seen: " << line;
+        EXPECT_LT(std::acos(std::clamp(up.normalized().dot(y_axis(*t)), -1.0, 1.0)) * 180.0 / std::numbers::pi, 5.0)
+            << line;
+        // The legs hang down from the pelvis: a thigh's or shank's long axis (proximal up) is within 60 degrees of
+        // the vertical while walking (hip flexion and knee flexion in swing stay below it), not horizontal.
+        if (name.rfind("thigh", 0) == 0 || name.rfind("shank", 0) == 0) {
+          EXPECT_GT(up.normalized().z(), 0.5) << line;
+        }
+        ++segments;
+      } else if (kind == "J") {
+        // "J name ts a b c | names n1 n2 n3 | plot ts p1 p2 p3": the plotted series are the named anatomical
+        // angles of bsn/joint_angles of the same sample, within 0.01 degree.
+        double ts = 0, plot_ts = 0;
+        std::array<double, 3> shown{}, plotted{};
+        std::string names_word, n1, n2, n3, plot_word;
+        l >> ts >> shown[0] >> shown[1] >> shown[2] >> bar >> names_word >> n1 >> n2 >> n3 >> bar >> plot_word >>
+            plot_ts >> plotted[0] >> plotted[1] >> plotted[2];
+        if (name.rfind("knee", 0) == 0) {
+          EXPECT_EQ(n1 + " " + n2 + " " + n3, "flexion_extension adduction_abduction internal_external_rotation")
+              << line;
+        }
+        const auto* a = at_time(seen.joints[name], plot_ts);
+        ASSERT_NE(a, nullptr) << "joint " << name << " at " << plot_ts << " never on bsn/joint_angles: " << line;
+        for (int i = 0; i < 3; ++i) EXPECT_NEAR(plotted[i], (*a)[i], 0.01) << line;
+        ++joint_lines;
+      }
+    }
+    EXPECT_EQ(segments, 7) << text;
+    EXPECT_EQ(joint_lines, 6) << text;
+  }
+  // Every node's mounting, by its name: aligned.
+  const std::string nodes = devtools.eval(
+      "Array.from(document.querySelectorAll('#nodes tbody tr')).map(tr => tr.cells[0].textContent.split(' ')[0] + "
+      "'=' + tr.cells[5].textContent).sort().join(';')");
+  EXPECT_EQ(nodes,
+            "foot_l=aligned;foot_r=aligned;pelvis=aligned;shank_l=aligned;shank_r=aligned;thigh_l=aligned;"
+            "thigh_r=aligned");
+  const std::string shot = devtools.call("Page.captureScreenshot", "{\"format\":\"png\"}", 20s);
+  write_file(dir() / "aligned_view.png", base64_decode(json_string_value(shot, "data")));
 }
 
 }  // namespace

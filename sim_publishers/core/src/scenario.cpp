@@ -139,6 +139,7 @@ bool ScenarioRunner::next(std::vector<ScenarioSample>& out) {
     ScenarioSample& o = out[j];
     o.sample = sensors_[j].measure(s.gyr_sensor, s.specific_force_sensor(), mag, t, t_ns, has_mag);
     o.truth = s.q_sensor;
+    o.segment_truth = anatomical_orientation(s);
     o.dropped = dropped;
     o.movement = spec_.movement.empty() || inside_any(spec_.movement, t);
     o.joint = joints_[j];

@@ -51,6 +51,50 @@ TEST(ViewState, ErrorToTruthOfTheSameSample) {
   EXPECT_NE(none->find("\"err\":null"), std::string::npos) << *none;
 }
 
+TEST(ViewState, AnAlignedEstimateIsComparedWithTheTruthOfItsSegmentFrame) {
+  ViewState state;
+  const double half = 90.0 / 2 * std::numbers::pi / 180;  // a sensor turned 90 degrees about x on its segment
+  const std::array<double, 4> segment{1, 0, 0, 0}, sensor{std::cos(half), std::sin(half), 0, 0};
+  bsn::Orientation segment_truth = orientation("a", 5, segment);
+  segment_truth.flags(bsn::FLAG_SEGMENT_FRAME);
+  // Before any estimate the ghost shows the sensor's truth; the segment frame's is kept but not sent.
+  EXPECT_TRUE(state.on_truth(orientation("a", 5, sensor), 0));
+  EXPECT_FALSE(state.on_truth(segment_truth, 100 * kMs));
+  bsn::Orientation aligned = orientation("a", 5, segment);
+  aligned.flags(bsn::FLAG_SEGMENT_FRAME);
+  const auto m = state.on_orientation(aligned, 200 * kMs);
+  ASSERT_TRUE(m);
+  EXPECT_NE(m->find("\"err\":0}"), std::string::npos) << "the segment frame's truth, not the sensor's: " << *m;
+  // From now on the ghost is the segment frame's truth, flagged so.
+  segment_truth.timestamp_ns(6);
+  const auto t = state.on_truth(segment_truth, 300 * kMs);
+  ASSERT_TRUE(t);
+  EXPECT_NE(t->find("\"flags\":32"), std::string::npos) << *t;
+  EXPECT_FALSE(state.on_truth(orientation("a", 6, sensor), 400 * kMs));
+  // A sensor-frame estimate of the same sample is compared with the sensor's truth.
+  const auto raw = state.on_orientation(orientation("a", 5, sensor), 500 * kMs);
+  ASSERT_TRUE(raw);
+  EXPECT_NE(raw->find("\"err\":0}"), std::string::npos) << *raw;
+}
+
+TEST(ViewState, JointMessagesCarryTheNamedAnatomicalAngles) {
+  ViewState state;
+  bsn::JointAngles j;
+  j.joint("knee_l");
+  j.axes("zyx");
+  j.angles({-0.5, 0.1, 0.2});
+  j.anatomy("knee");
+  j.side("left");
+  j.anatomical_names({"flexion_extension", "adduction_abduction", "internal_external_rotation"});
+  j.anatomical({0.5, -0.1, 0.2});
+  const auto m = state.on_joint(j, 0);
+  ASSERT_TRUE(m);
+  EXPECT_NE(m->find("\"names\":[\"flexion_extension\",\"adduction_abduction\",\"internal_external_rotation\"]"),
+            std::string::npos)
+      << *m;
+  EXPECT_NE(m->find("\"anat\":[28.647889"), std::string::npos) << "flexion positive, degrees: " << *m;
+}
+
 TEST(ViewState, RotationAngleIsExactNearZeroAndAtHalfTurns) {
   const double tiny = 1e-6 / 2;  // 1e-6 rad about x
   EXPECT_NEAR(rotation_angle_deg({1, 0, 0, 0}, {std::cos(tiny), std::sin(tiny), 0, 0}), 1e-6 * 180 / std::numbers::pi,

@@ -39,7 +39,13 @@ inline constexpr Topic<bsn::RawSamplePubSubType> kRawTopic{"bsn/raw", TopicQos::
 inline constexpr Topic<bsn::OrientationPubSubType> kOrientationTopic{"bsn/orientation", TopicQos::kEstimate};
 inline constexpr Topic<bsn::JointAnglesPubSubType> kJointAnglesTopic{"bsn/joint_angles", TopicQos::kEstimate};
 inline constexpr Topic<bsn::StatusPubSubType> kStatusTopic{"bsn/status", TopicQos::kLatched};
+/// The simulator's true orientation of each sensor (sensor frame, no FLAG_SEGMENT_FRAME): what bsn/orientation
+/// reads on the default mounting.
 inline constexpr Topic<bsn::OrientationPubSubType> kTruthOrientationTopic{"bsn/truth/orientation", TopicQos::kEstimate};
+/// The simulator's true ISB segment frame of each segment (FLAG_SEGMENT_FRAME): what bsn/orientation reads once the
+/// segment is aligned. A consumer compares an estimate with the truth of the same frame (the estimate's flag).
+inline constexpr Topic<bsn::OrientationPubSubType> kTruthSegmentOrientationTopic{"bsn/truth/segment_orientation",
+                                                                                 TopicQos::kEstimate};
 /// The simulator's true joint angles (ISB segment frames), keyed by joint: what bsn/joint_angles should read.
 inline constexpr Topic<bsn::JointAnglesPubSubType> kTruthJointAnglesTopic{"bsn/truth/joint_angles",
                                                                           TopicQos::kEstimate};
@@ -55,6 +61,7 @@ inline constexpr std::tuple kAllTopics{kRawTopic,
                                        kJointAnglesTopic,
                                        kStatusTopic,
                                        kTruthOrientationTopic,
+                                       kTruthSegmentOrientationTopic,
                                        kTruthJointAnglesTopic,
                                        kCalibrationRequestTopic,
                                        kCalibrationResultTopic,

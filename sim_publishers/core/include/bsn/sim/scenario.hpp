@@ -52,8 +52,9 @@ ScenarioSpec swing_scenario(const std::string& segment, std::uint64_t seed, doub
 
 /// One segment's output at one sample.
 struct ScenarioSample {
-  fusion::ImuSample sample;  ///< timestamp in ns from the scenario start
-  Quat truth = Quat::Identity();
+  fusion::ImuSample sample;               ///< timestamp in ns from the scenario start
+  Quat truth = Quat::Identity();          ///< sensor-to-earth
+  Quat segment_truth = Quat::Identity();  ///< the segment's ISB frame to earth (what an aligned estimate reads)
   bool dropped = false;  ///< the sensor lost this sample (sample is still filled with what it would have read)
   bool movement = true;  ///< inside the scenario's movement windows
   // The joint to the segment's parent (none for a root): its convention (from the joint's name), the relative

@@ -1,0 +1,59 @@
+// `bsn session`: one command runs a lab session on the simulated lower body (the shipped session file): the
+// alignment, a 30 s trial recorded and exported to OpenSim files, and every process it started stopped.
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "bsn/io/session_file.hpp"
+#include "process_fixture.hpp"
+
+namespace bsn::integration {
+namespace {
+
+using namespace std::chrono_literals;
+
+const std::filesystem::path kRepository = BSN_SOURCE_DIR;
+
+TEST_F(ProcessTest, SessionAlignsRecordsExportsAndStopsEverything) {
+  const int domain = test_domain(95);
+  // The shipped session file, run from this test's folder (where it writes calib/ and trials/).
+  auto& session = spawn_command("session", {"/bin/sh", "-c",
+                                            "cd '" + dir().string() + "' && exec '" + bsn_executable() + "' session '" +
+                                                (kRepository / "sessions/lower_body_sim.yaml").string() +
+                                                "' --domain " + std::to_string(domain) + " < /dev/null"});
+  const auto status = session.wait_for(150s);
+  ASSERT_TRUE(exited_cleanly(status)) << describe_status(status) << "\n" << tail(log_path("session"), 60);
+  const std::string log = read_file(log_path("session"));
+  EXPECT_NE(log.find("alignment: stand still"), std::string::npos) << "the N-pose is asked for:\n" << log;
+  for (const char* node : {"pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r"})
+    EXPECT_NE(log.find(std::string("alignment: ") + node + " aligned"), std::string::npos) << node << "\n" << log;
+  // Nothing left running in the domain.
+  EXPECT_TRUE(bsn_processes_in_domain(domain).empty());
+
+  // 30 s recorded, after the alignment: every estimate in its segment frame.
+  const io::SessionReader r((dir() / "trials" / "walk.h5").string());
+  const auto streams = r.streams_of("bsn/orientation");
+  ASSERT_EQ(streams.size(), 7u);
+  for (const auto& s : streams) {
+    const auto ts = r.read_u64(s, "timestamp_ns");
+    const auto flags = r.read_u32(s, "flags");
+    ASSERT_GT(ts.size(), 2000u) << s.key << ": about 30 s at 100 Hz";
+    EXPECT_NEAR(static_cast<double>(ts.back() - ts.front()) * 1e-9, 30.0, 1.5) << s.key;
+    std::size_t aligned = 0;
+    for (const auto f : flags) aligned += (f & 32u) != 0;  // FLAG_SEGMENT_FRAME
+    EXPECT_EQ(aligned, flags.size()) << s.key << ": recorded after the alignment";
+  }
+  // Exported: the OpenSense files in segment frames, the joint angles as .mot, the (empty) event markers.
+  const auto out = dir() / "trials" / "walk";
+  for (const char* f :
+       {"orientations.sto", "calibration.sto", "joint_angles.mot", "truth_orientations.sto", "events.csv"})
+    EXPECT_TRUE(std::filesystem::exists(out / f)) << f;
+  EXPECT_NE(read_file(out / "orientations.sto").find("bsn_frames=segment\n"), std::string::npos);
+  EXPECT_NE(read_file(out / "joint_angles.mot").find("knee_l_flexion_extension"), std::string::npos);
+  EXPECT_EQ(read_file(out / "events.csv"), "unix_ns,monotonic_ns,label\n");
+  for (const char* node : {"pelvis", "thigh_l", "foot_r"})
+    EXPECT_TRUE(std::filesystem::exists(dir() / "calib" / (std::string(node) + ".alignment.calib.yaml"))) << node;
+}
+
+}  // namespace
+}  // namespace bsn::integration
