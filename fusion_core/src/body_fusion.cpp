@@ -31,7 +31,8 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
     segments_[i].gate = SampleGate(params.gate);
     if (const auto c = calibrations.find(spec.node); c != calibrations.end()) segments_[i].calibration = c->second;
     segments_[i].parent = body_.find_segment(spec.parent);
-    if (spec.kinematic_heading && segments_[i].parent) segments_[i].kinematic_heading.emplace(*spec.kinematic_heading);
+    if (spec.kinematic_heading && segments_[i].parent)
+      segments_[i].kinematic_heading.emplace(*kinematic_heading_params(spec));
     if (spec.sensor_to_segment) {
       segments_[i].sensor_to_segment = spec.sensor_to_segment->normalized();
       segments_[i].aligned = true;

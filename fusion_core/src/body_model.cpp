@@ -38,14 +38,24 @@ std::optional<BodyModelProblem> check_body_model(const BodyModel& body) {
     if (!s.parent.empty() && !by_name.contains(s.parent)) {
       return BodyModelProblem{i, "segment '" + s.name + "' has unknown parent '" + s.parent + "'"};
     }
+    if (s.hinge_axis && s.parent.empty()) {
+      return BodyModelProblem{i, "segment '" + s.name + "': hinge_axis needs a joint (a parent segment)"};
+    }
     if (s.kinematic_heading) {
       if (s.parent.empty()) {
         return BodyModelProblem{i, "segment '" + s.name + "': heading: kinematic needs a joint (a parent segment)"};
       }
       try {
-        s.kinematic_heading->check();
+        kinematic_heading_params(s)->check();
       } catch (const std::invalid_argument& e) {
         return BodyModelProblem{i, "segment '" + s.name + "': " + e.what()};
+      }
+    }
+    if (s.hinge_axis) {
+      for (const Vec3* axis : {&s.hinge_axis->parent, &s.hinge_axis->child}) {
+        if (!axis->allFinite() || !(axis->norm() > 1e-9)) {
+          return BodyModelProblem{i, "segment '" + s.name + "': hinge_axis must be a finite, non-zero vector"};
+        }
       }
     }
   }
@@ -62,6 +72,49 @@ std::optional<BodyModelProblem> check_body_model(const BodyModel& body) {
     }
   }
   return std::nullopt;
+}
+
+std::optional<Vec3> parse_segment_axis(std::string_view name) {
+  if (name.size() == 1 || (name.size() == 2 && (name[0] == '-' || name[0] == '+'))) {
+    const double sign = name[0] == '-' ? -1.0 : 1.0;
+    switch (name.back()) {
+      case 'x':
+        return Vec3(sign, 0.0, 0.0);
+      case 'y':
+        return Vec3(0.0, sign, 0.0);
+      case 'z':
+        return Vec3(0.0, 0.0, sign);
+      default:
+        return std::nullopt;
+    }
+  }
+  const auto direction = parse_direction(name);
+  if (!direction) return std::nullopt;
+  switch (*direction) {
+    case Direction::kAnterior:
+      return Vec3::UnitX();
+    case Direction::kPosterior:
+      return Vec3(-Vec3::UnitX());
+    case Direction::kSuperior:
+      return Vec3::UnitY();
+    case Direction::kInferior:
+      return Vec3(-Vec3::UnitY());
+    case Direction::kRight:
+      return Vec3::UnitZ();
+    case Direction::kLeft:
+      return Vec3(-Vec3::UnitZ());
+  }
+  return std::nullopt;
+}
+
+std::optional<HingeHeadingEstimator::Params> kinematic_heading_params(const SegmentSpec& segment) {
+  if (!segment.kinematic_heading) return std::nullopt;
+  HingeHeadingEstimator::Params p = *segment.kinematic_heading;
+  if (segment.hinge_axis) {
+    p.parent_axis = segment.hinge_axis->parent;
+    p.child_axis = segment.hinge_axis->child;
+  }
+  return p;
 }
 
 std::string joint_name(const SegmentSpec& segment) {

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <stdexcept>
 
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/logging/log.hpp"
@@ -101,9 +103,30 @@ CLI::Validator positive_number(double max) { return number_in(0.0, max, true); }
 CLI::Validator non_negative_number(double max) { return number_in(0.0, max, false); }
 
 void add_domain_option(CLI::App* command, int& domain) {
-  domain = dds::default_domain();
-  command->add_option("--domain", domain, "DDS domain id, 0..232 (default: $BSN_DOMAIN or 0)")
-      ->check(CLI::Range(0, 232));
+  std::string bad_environment;
+  try {
+    domain = dds::default_domain();
+  } catch (const std::invalid_argument& e) {
+    domain = 0;
+    bad_environment = e.what();
+  }
+  CLI::Option* option = command->add_option("--domain", domain, "DDS domain id, 0..232 (default: $BSN_DOMAIN or 0)")
+                            ->check(CLI::Validator(
+                                [](std::string& text) -> std::string {
+                                  char* end = nullptr;
+                                  errno = 0;
+                                  const long v = std::strtol(text.c_str(), &end, 10);
+                                  if (!text.empty() && *end == '\0' && errno == 0 && v >= 0 && v <= 232) return {};
+                                  return "'" + text + "' is not a DDS domain id in 0..232";
+                                },
+                                "INT in 0..232"));
+  // A bad BSN_DOMAIN is a usage error (exit 2) unless --domain overrides it: never a silent fallback to domain 0,
+  // where this process could disturb another system.
+  if (!bad_environment.empty()) {
+    command->parse_complete_callback([option, bad_environment] {
+      if (option->count() == 0) throw CLI::ValidationError(bad_environment);
+    });
+  }
   // Both go into the environment, where the participant reads them, so children (bsn demo's) inherit them.
   command
       ->add_option_function<std::string>(

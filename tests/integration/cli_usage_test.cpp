@@ -111,6 +111,47 @@ TEST_F(CliUsage, ADirectoryGivenAsAFileIsNamedSo) {
   EXPECT_NE(output("scenario").find("directory"), std::string::npos) << output("scenario");
 }
 
+TEST_F(CliUsage, ADomainOutOfRangeIsAUsageErrorNeverAFallback) {
+  // Domain 0 may be another system's: a bad BSN_DOMAIN or --domain must stop the command (exit 2, naming the value)
+  // before any DDS participant exists, not warn and run in domain 0.
+  auto run_with_env = [&](const std::string& name, const std::string& env, std::vector<std::string> args) {
+    args.insert(args.begin(), {"BSN_DOMAIN=" + env, bsn_executable()});
+    const auto status = spawn_command(name,
+                                      [&] {
+                                        std::vector<std::string> argv{"/usr/bin/env"};
+                                        argv.insert(argv.end(), args.begin(), args.end());
+                                        return argv;
+                                      }())
+                            .wait_for(20s);
+    EXPECT_TRUE(status.has_value()) << name << " did not exit within 20 s";
+    return exit_code(status);
+  };
+  const std::vector<std::string> bad_environment{"233", "300", "-1", "abc", "5x", "99999999999999999999"};
+  for (std::size_t i = 0; i < bad_environment.size(); ++i) {
+    const std::string& env = bad_environment[i];
+    const std::string name = "env" + std::to_string(i);
+    EXPECT_EQ(run_with_env(name, env, {"fusion"}), 2) << "BSN_DOMAIN=" << env << "\n" << output(name);
+    EXPECT_NE(output(name).find("BSN_DOMAIN='" + env + "' is not a DDS domain id in 0..232"), std::string::npos)
+        << output(name);
+    EXPECT_EQ(output(name).find("using 0"), std::string::npos) << output(name);
+  }
+  const std::vector<std::string> bad_option{"233", "-1", "1e2", "x"};
+  for (std::size_t i = 0; i < bad_option.size(); ++i) {
+    const std::string name = "option" + std::to_string(i);
+    EXPECT_EQ(run(name, {"echo", "bsn/raw", "--domain", bad_option[i]}), 2) << bad_option[i];
+    EXPECT_NE(output(name).find("'" + bad_option[i] + "' is not a DDS domain id in 0..232"), std::string::npos)
+        << output(name);
+    EXPECT_NE(output(name).find("--domain"), std::string::npos) << output(name);
+  }
+  // --domain given overrides a bad BSN_DOMAIN: the command runs (and here times out waiting for a sample: exit 1).
+  EXPECT_EQ(run_with_env(
+                "override", "300",
+                {"echo", "bsn/raw", "--count", "1", "--timeout", "0.5", "--domain", std::to_string(test_domain(87))}),
+            1)
+      << output("override");
+  EXPECT_NE(output("override").find("timeout"), std::string::npos) << output("override");
+}
+
 TEST_F(CliUsage, HelpListsEveryCommandAndExitsZero) {
   EXPECT_EQ(run("help", {"--help"}), 0);
   for (const char* command : {"sim", "fusion", "echo", "demo", "eval", "calibrate"})

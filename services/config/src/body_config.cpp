@@ -142,6 +142,38 @@ class Parser : public config::YamlReader<ConfigError> {
     return p;
   }
 
+  // One hinge axis in a segment frame: a named axis (x, -y, anterior, right, ...) or a vector [x, y, z].
+  fusion::Vec3 segment_axis(const YAML::Node& n, const char* what) const {
+    if (n.IsSequence()) {
+      if (n.size() != 3)
+        fail(n, std::string(what) +
+                    " must be a named axis (x, y, z, -x, ..., anterior, right, ...) or "
+                    "a vector [x, y, z]");
+      const fusion::Vec3 v(number(n[0], "x"), number(n[1], "y"), number(n[2], "z"));
+      if (!v.allFinite() || !(v.norm() > 1e-9)) fail(n, std::string(what) + " must not be the zero vector");
+      return v.normalized();
+    }
+    const std::string name = text(n, what);
+    const auto axis = fusion::parse_segment_axis(name);
+    if (!axis)
+      fail(n, std::string(what) + " '" + name +
+                  "' is not x, y, z (optionally signed: -x), one of anterior, posterior, superior (up), inferior "
+                  "(down), left, right, or a vector [x, y, z]");
+    return *axis;
+  }
+
+  // `hinge_axis: z`, `hinge_axis: [0, 0.6, 0.8]` (the same in both segment frames: they are parallel in the reference
+  // pose), or `hinge_axis: {parent: x, child: [0, 0, 1]}`.
+  fusion::HingeAxis hinge_axis(const YAML::Node& n) const {
+    if (n.IsMap()) {
+      check_keys(n, {"parent", "child"}, "hinge_axis");
+      if (!n["parent"] || !n["child"]) fail(n, "hinge_axis as a map needs both parent and child");
+      return {segment_axis(n["parent"], "hinge_axis parent"), segment_axis(n["child"], "hinge_axis child")};
+    }
+    const fusion::Vec3 axis = segment_axis(n, "hinge_axis");
+    return {axis, axis};
+  }
+
   // `calibration: FILE` (relative to the body file): loaded here only to report a bad file at its line; the
   // fusion service reads it again with load_body_calibrations().
   void check_calibration(const YAML::Node& n) const {
@@ -177,7 +209,7 @@ class Parser : public config::YamlReader<ConfigError> {
       require_map(s, "a segment");
       check_keys(s,
                  {"name", "node", "parent", "joint", "joint_axes", "anatomy", "side", "sensor_axes",
-                  "sensor_to_segment", "heading", "filter", "calibration"},
+                  "sensor_to_segment", "heading", "hinge_axis", "filter", "calibration"},
                  "segment");
       SegmentSpec spec;
       if (!s["name"]) fail(s, "segment without 'name'");
@@ -193,6 +225,11 @@ class Parser : public config::YamlReader<ConfigError> {
         if (spec.parent.empty())
           fail(s["heading"], "heading applies to a joint: segment '" + spec.name + "' has no parent");
         spec.kinematic_heading = heading(s["heading"]);
+      }
+      if (s["hinge_axis"]) {
+        if (spec.parent.empty())
+          fail(s["hinge_axis"], "hinge_axis applies to a joint: segment '" + spec.name + "' has no parent");
+        spec.hinge_axis = hinge_axis(s["hinge_axis"]);
       }
       if (s["calibration"]) check_calibration(s["calibration"]);
       model.segments.push_back(std::move(spec));
@@ -306,6 +343,21 @@ std::string body_model_to_yaml(const BodyModel& body) {
         out << YAML::Flow << YAML::BeginMap << YAML::Key << "mode" << YAML::Value << "kinematic" << YAML::Key
             << "window_s" << YAML::Value << h->window_s << YAML::Key << "min_observability" << YAML::Value
             << h->min_observability << YAML::Key << "max_step_s" << YAML::Value << h->max_step_s << YAML::EndMap;
+      }
+    }
+    if (const auto& a = s.hinge_axis) {
+      auto vector = [&](const fusion::Vec3& v) {
+        out << YAML::Flow << YAML::BeginSeq << v.x() << v.y() << v.z() << YAML::EndSeq;
+      };
+      out << YAML::Key << "hinge_axis" << YAML::Value;
+      if (a->parent == a->child) {
+        vector(a->parent);
+      } else {
+        out << YAML::Flow << YAML::BeginMap << YAML::Key << "parent" << YAML::Value;
+        vector(a->parent);
+        out << YAML::Key << "child" << YAML::Value;
+        vector(a->child);
+        out << YAML::EndMap;
       }
     }
     out << YAML::Key << "filter" << YAML::Value << YAML::Flow << YAML::BeginMap;

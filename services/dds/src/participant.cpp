@@ -3,6 +3,7 @@
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdlib>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <filesystem>
@@ -184,9 +185,12 @@ void count_lost(EndpointEvents& events, const SampleInfo& info) {
 int default_domain() {
   if (const char* env = std::getenv("BSN_DOMAIN")) {
     char* end = nullptr;
+    errno = 0;
     const long v = std::strtol(env, &end, 10);
-    if (end != env && *end == '\0' && v >= 0 && v <= 232) return static_cast<int>(v);
-    logging::log_warn("BSN_DOMAIN='", env, "' is not a domain id in 0..232; using 0");
+    if (end != env && *end == '\0' && errno == 0 && v >= 0 && v <= 232) return static_cast<int>(v);
+    // No fallback: domain 0 may be another system's, which this process would then disturb.
+    throw std::invalid_argument("BSN_DOMAIN='" + logging::printable(env) +
+                                "' is not a DDS domain id in 0..232 (unset it, or fix it, or give --domain D)");
   }
   return 0;
 }

@@ -395,4 +395,27 @@ Body upper_body(const std::optional<Reaching>& reaching, const Pose& pose) {
   return Body(std::move(segs));
 }
 
+Body hinge_chain(const Pose& pose) {
+  SegmentDef base;
+  base.name = "base";
+  add_pose(base, pose);
+  base.sensor_offset = Vec3(0.05, 0.0, 0.15);
+  SegmentDef link_1;
+  link_1.name = "link_1";
+  link_1.parent = 0;
+  link_1.joint_offset = Vec3(0.0, 0.0, 0.3);
+  // ISB Z (right) is the simulator's -y: a positive angle about it tips the link forward.
+  link_1.rotation = {harmonic_step(Vec3(0.0, -1.0, 0.0), 10.0 * kDeg, {{20.0 * kDeg, 0.25, 0.0}})};
+  link_1.sensor_offset = Vec3(0.05, 0.0, 0.15);
+  link_1.joint = "hinge_1";
+  SegmentDef link_2;
+  link_2.name = "link_2";
+  link_2.parent = 1;
+  link_2.joint_offset = Vec3(0.0, 0.0, 0.3);
+  link_2.rotation = {harmonic_step(Vec3::UnitX(), 0.0, {{30.0 * kDeg, 0.35, 1.0}})};
+  link_2.sensor_offset = Vec3(0.05, 0.0, 0.15);
+  link_2.joint = "hinge_2";
+  return Body({base, link_1, link_2});
+}
+
 }  // namespace bsn::sim

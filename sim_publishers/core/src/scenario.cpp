@@ -43,6 +43,9 @@ Body build_body(const ScenarioSpec& spec) {
     case BodyKind::kUpperBody:
       body = upper_body(spec.reaching, spec.pose);
       break;
+    case BodyKind::kHingeChain:
+      body = hinge_chain(spec.pose);
+      break;
     case BodyKind::kFree:
       return free_body(spec.free_motion, spec.free_body_name);
   }

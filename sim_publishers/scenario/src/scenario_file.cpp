@@ -191,19 +191,22 @@ class Parser : public config::YamlReader<ScenarioError> {
       spec.body = BodyKind::kLowerBody;
     else if (kind == "upper_body")
       spec.body = BodyKind::kUpperBody;
+    else if (kind == "hinge_chain")
+      spec.body = BodyKind::kHingeChain;
     else
-      fail(n["kind"], "body kind must be free, lower_body or upper_body");
+      fail(n["kind"], "body kind must be free, lower_body, upper_body or hinge_chain");
     auto only = [&](const char* key, BodyKind k, const char* kind_name) {
       if (n[key] && spec.body != k) fail(n[key], std::string("'") + key + "' needs body kind " + kind_name);
     };
     for (const char* key : {"segment", "random", "rotations", "pose_sequence"}) only(key, BodyKind::kFree, "free");
-    if (n["moves"] && spec.body == BodyKind::kUpperBody) fail(n["moves"], "'moves' needs body kind free or lower_body");
+    if (n["moves"] && (spec.body == BodyKind::kUpperBody || spec.body == BodyKind::kHingeChain))
+      fail(n["moves"], "'moves' needs body kind free or lower_body");
     if (n["moves"] && spec.body == BodyKind::kLowerBody && !n["gait"])
       fail(n["moves"], "'moves' of a lower body needs a gait (e.g. gait: {speed_m_s: 0} to walk on the spot)");
     only("gait", BodyKind::kLowerBody, "lower_body");
     only("reaching", BodyKind::kUpperBody, "upper_body");
     if (n["mounting"] && spec.body == BodyKind::kFree)
-      fail(n["mounting"], "'mounting' needs body kind lower_body or upper_body");
+      fail(n["mounting"], "'mounting' needs body kind lower_body, upper_body or hinge_chain");
     if (n["segment"]) spec.free_body_name = text(n["segment"], "segment");
     if (n["pose"]) {
       spec.pose = pose(n["pose"]);

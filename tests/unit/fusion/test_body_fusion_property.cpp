@@ -176,7 +176,7 @@ TEST(BodyFusionProperty, AnyInterleavingOfGoodAndHostileSamplesKeepsTheCountsAnd
 TEST(BodyFusionProperty, LossesInAStreamThatWrapsAreCountedExactly) {
   // Without hostile samples the missing count is exact, across the 2^64 wrap too.
   BodyModel body;
-  body.segments.push_back(SegmentSpec{"seg", "a", "", "", {}, {}, {}, {}, {}});
+  body.segments.push_back(SegmentSpec{"seg", "a", "", "", {}, {}, {}, {}, {}, {}});
   BodyFusion fusion(body, {}, BodyFusion::Params{}, 0);
   std::mt19937_64 rng(16);
   std::uint64_t seq = kTop - 300, t = 1'000'000'000, dropped = 0;

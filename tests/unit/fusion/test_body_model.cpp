@@ -170,6 +170,76 @@ TEST(BodyModel, BadKinematicHeadingNamesItsLine) {
   EXPECT_NE(e.find("has no parent"), std::string::npos) << e;
 }
 
+TEST(BodyModel, HingeAxisFromTheFile) {
+  const auto body = parse_body_model(R"(segments:
+  - name: base
+  - name: link_1
+    parent: base
+    hinge_axis: z
+    heading: kinematic
+  - name: link_2
+    parent: link_1
+    hinge_axis: anterior
+    heading: {mode: kinematic, window_s: 2}
+  - name: link_3
+    parent: link_2
+    hinge_axis: [0, 3, 4]
+  - name: link_4
+    parent: link_3
+    hinge_axis: {parent: -y, child: [1, 0, 0]}
+)",
+                                     "body.yaml");
+  ASSERT_EQ(body.segments.size(), 5u);
+  EXPECT_FALSE(body.segments[0].hinge_axis);
+  auto near = [](const fusion::Vec3& a, const fusion::Vec3& b) { return (a - b).norm() < 1e-12; };
+  ASSERT_TRUE(body.segments[1].hinge_axis);
+  EXPECT_TRUE(near(body.segments[1].hinge_axis->parent, fusion::Vec3::UnitZ()));
+  ASSERT_TRUE(body.segments[2].hinge_axis);
+  EXPECT_TRUE(near(body.segments[2].hinge_axis->parent, fusion::Vec3::UnitX()));
+  EXPECT_TRUE(near(body.segments[2].hinge_axis->child, fusion::Vec3::UnitX()));
+  ASSERT_TRUE(body.segments[3].hinge_axis);
+  EXPECT_TRUE(near(body.segments[3].hinge_axis->parent, fusion::Vec3(0, 0.6, 0.8)));  // normalised
+  ASSERT_TRUE(body.segments[4].hinge_axis);
+  EXPECT_TRUE(near(body.segments[4].hinge_axis->parent, -fusion::Vec3::UnitY()));
+  EXPECT_TRUE(near(body.segments[4].hinge_axis->child, fusion::Vec3::UnitX()));
+  // The kinematic heading takes its axes from the hinge axis; without one, Z.
+  const auto p = fusion::kinematic_heading_params(body.segments[2]);
+  ASSERT_TRUE(p);
+  EXPECT_TRUE(near(p->parent_axis, fusion::Vec3::UnitX()));
+  EXPECT_EQ(p->window_s, 2.0);
+  EXPECT_FALSE(fusion::kinematic_heading_params(body.segments[3]));
+  // Printed and read back, the same axes.
+  const auto again = parse_body_model(config::body_model_to_yaml(body), "again.yaml");
+  for (std::size_t i = 0; i < body.segments.size(); ++i) {
+    ASSERT_EQ(again.segments[i].hinge_axis.has_value(), body.segments[i].hinge_axis.has_value()) << i;
+    if (!body.segments[i].hinge_axis) continue;
+    EXPECT_TRUE(near(again.segments[i].hinge_axis->parent, body.segments[i].hinge_axis->parent)) << i;
+    EXPECT_TRUE(near(again.segments[i].hinge_axis->child, body.segments[i].hinge_axis->child)) << i;
+  }
+  EXPECT_TRUE(again.segments[2].kinematic_heading);
+}
+
+TEST(BodyModel, BadHingeAxisNamesItsLine) {
+  const std::string head = "segments:\n  - name: a\n  - name: b\n    parent: a\n";
+  std::string e = error_of(head + "    hinge_axis: w\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("hinge_axis 'w' is not x, y, z"), std::string::npos) << e;
+  e = error_of(head + "    hinge_axis: [0, 0, 0]\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  EXPECT_NE(e.find("zero vector"), std::string::npos) << e;
+  e = error_of(head + "    hinge_axis: [1, 0]\n");
+  EXPECT_NE(e.find("a vector [x, y, z]"), std::string::npos) << e;
+  e = error_of(head + "    hinge_axis: [1, nan, 0]\n");
+  EXPECT_NE(e.find("body.yaml:5:"), std::string::npos) << e;
+  e = error_of(head + "    hinge_axis: {parent: x}\n");
+  EXPECT_NE(e.find("needs both parent and child"), std::string::npos) << e;
+  e = error_of(head + "    hinge_axis: {parent: x, child: x, other: y}\n");
+  EXPECT_NE(e.find("unknown key 'other'"), std::string::npos) << e;
+  e = error_of("segments:\n  - name: a\n    hinge_axis: x\n");
+  EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;
+  EXPECT_NE(e.find("has no parent"), std::string::npos) << e;
+}
+
 TEST(BodyModel, UnknownKeyNamesFileLineAndKey) {
   const std::string e = error_of("segments:\n  - name: a\n    colour: red\n");
   EXPECT_NE(e.find("body.yaml:3:"), std::string::npos) << e;

@@ -59,6 +59,9 @@ const std::vector<Expectation>& expectations() {
       {"gait_alignment", "foot_r", {1, 10, 40}, {}},
       {"reach_upper_body", "hand_r", {}, {1, 30}},
       {"reach_upper_body", "hand_l", {1, 30}, {}},
+      {"hinge_chain_disturbed", "base", {1, 30, 59}, {}},
+      {"hinge_chain_disturbed", "link_1", {}, {1, 30, 59}},
+      {"hinge_chain_disturbed", "link_2", {}, {1, 30, 59}},
   };
   return table;
 }
@@ -80,7 +83,7 @@ TEST(SimScenarios, EveryShippedScenarioLoadsAndIsChecked) {
     EXPECT_NO_THROW(ScenarioRunner(spec, {}, false)) << stem;
     EXPECT_TRUE(checked.count(stem)) << stem << " has no disturbance expectations in this test";
   }
-  EXPECT_EQ(files, 17);
+  EXPECT_EQ(files, 18);
 }
 
 TEST(SimScenarios, DisturbancesShowWhereTheScenarioPutsThem) {

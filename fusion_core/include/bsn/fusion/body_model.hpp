@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "bsn/fusion/anatomy.hpp"
@@ -13,6 +14,18 @@
 #include "bsn/fusion/rotation.hpp"
 
 namespace bsn::fusion {
+
+/// A hinge joint's axis in the two ISB segment frames. In the reference pose (the N-pose, where every segment frame
+/// is parallel to its parent's) the axis is one vector in both, so `child` is usually `parent`; a joint whose frames
+/// are not parallel at zero (a test rig, a robot arm with its own link frames) gives each.
+struct HingeAxis {
+  Vec3 parent = Vec3::UnitZ();  ///< in the parent's segment frame; any length > 0 (used normalised)
+  Vec3 child = Vec3::UnitZ();   ///< in the child's segment frame
+};
+
+/// The unit vector of a named segment-frame axis: "x", "y", "z" with an optional sign ("-x", "+z"), or an ISB
+/// direction ("anterior" = +X, "posterior", "superior"/"up" = +Y, "inferior"/"down", "right" = +Z, "left").
+std::optional<Vec3> parse_segment_axis(std::string_view name);
 
 struct SegmentSpec {
   std::string name;         ///< unique segment name, e.g. "thigh_l"
@@ -31,7 +44,13 @@ struct SegmentSpec {
   /// the hinge constraint, estimated with these parameters (hinge_heading.hpp); the joint's angles then use the
   /// child's orientation turned about the vertical by the estimated offset.
   std::optional<HingeHeadingEstimator::Params> kinematic_heading;
+  /// The joint's hinge axis, used by the kinematic heading (its parent_axis and child_axis). nullopt: Z in both
+  /// frames, the ISB flexion axis of the knee, elbow and ankle.
+  std::optional<HingeAxis> hinge_axis;
 };
+
+/// The kinematic heading parameters of a segment's joint with its hinge axis filled in; nullopt in the plain mode.
+std::optional<HingeHeadingEstimator::Params> kinematic_heading_params(const SegmentSpec& segment);
 
 struct BodyModel {
   std::string name;
@@ -48,8 +67,8 @@ struct BodyModelProblem {
 };
 
 /// Checks the rules: at least one segment; names and nodes non-empty, at most 63 characters and unique;
-/// every parent exists; no parent cycle; a kinematic heading only on a joint (a segment with a parent) and with valid
-/// parameters. Returns the first problem found, or nullopt.
+/// every parent exists; no parent cycle; a kinematic heading and a hinge axis only on a joint (a segment with a
+/// parent), with valid parameters and finite, non-zero axes. Returns the first problem found, or nullopt.
 std::optional<BodyModelProblem> check_body_model(const BodyModel& body);
 
 /// Joint name of a segment: its explicit name, or "<parent>-<child>".

@@ -178,7 +178,8 @@ class Participant {
   std::atomic<std::uint64_t> rejected_samples_{0};
 };
 
-/// Domain id from the environment variable BSN_DOMAIN, else 0.
+/// Domain id from the environment variable BSN_DOMAIN, else 0. Throws std::invalid_argument naming the value when
+/// BSN_DOMAIN is set but not a domain id in 0..232 (never a fallback to 0: that may be another system's domain).
 int default_domain();
 
 }  // namespace bsn::dds

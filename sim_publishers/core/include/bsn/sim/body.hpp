@@ -200,4 +200,13 @@ struct Reaching {
 /// Segments trunk, upper_arm_l, forearm_l, hand_l, upper_arm_r, forearm_r, hand_r.
 Body upper_body(const std::optional<Reaching>& reaching, const Pose& pose = {});
 
+/// A test rig of three links whose two hinges turn about different axes of the middle link: `base` (the root, fixed
+/// at `pose`), `link_1` hinged on top of it about the base's
+/// medio-lateral axis (ISB Z, the simulator's -y) and `link_2` hinged on top of link_1 about link_1's anterior axis
+/// (ISB X, the simulator's x), as a robot arm's shoulder pitch and roll. Links 0.3 m long, pointing up at zero;
+/// hinge_1 swings 10 +- 20 deg at 0.25 Hz, hinge_2 0 +- 30 deg at 0.35 Hz (a slow rig: accelerations below 0.5 m/s^2),
+/// so both hinge axes stay within about 30 deg of horizontal, where they show the relative heading. The joints are
+/// named hinge_1 and hinge_2 (no anatomy).
+Body hinge_chain(const Pose& pose = {});
+
 }  // namespace bsn::sim

@@ -16,7 +16,7 @@
 
 namespace bsn::sim {
 
-enum class BodyKind { kFree, kLowerBody, kUpperBody };
+enum class BodyKind { kFree, kLowerBody, kUpperBody, kHingeChain };
 
 /// How each sensor of a lower or upper body sits on its segment: rotated and displaced at random (own stream per
 /// segment), as sensors strapped on by hand are. The default is realistic: any rotation, up to 2 cm off its place.
@@ -36,7 +36,7 @@ struct ScenarioSpec {
   FreeMotion free_motion;               ///< free body
   std::optional<Gait> gait;             ///< lower body
   std::optional<Reaching> reaching;     ///< upper body
-  Pose pose;                            ///< lower and upper body: where they stand
+  Pose pose;                            ///< lower and upper body, hinge chain: where they stand
   Mounting mounting;                    ///< lower and upper body: the sensors' mounting errors
   MagneticEnvironment magnetic;         ///< attached magnets refer to segments of build_body() by index
   SensorErrors sensors;                 ///< the same error model (own random streams) on every segment
