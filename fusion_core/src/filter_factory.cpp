@@ -21,6 +21,7 @@ constexpr FilterInfo kFilters[] = {
     {"mekf", false, &make_mekf_filter},
     {"mekf_adaptive", false, &make_mekf_adaptive_filter},
     {"seel_ruppin", false, &make_seel_ruppin_filter},
+    {"seel_ruppin6", true, &make_seel_ruppin6_filter},
     {"madgwick", false, &make_madgwick_filter},
     {"madgwick6", true, &make_madgwick6_filter},
     {"iecf", false, &make_iecf_filter},

@@ -13,6 +13,7 @@ namespace bsn::fusion {
 namespace {
 
 constexpr const char* kName = "seel_ruppin";
+constexpr const char* kName6 = "seel_ruppin6";
 
 using P = SeelRuppinFilter::Params;
 constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
@@ -29,16 +30,16 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                            bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
                                            rest_param_fields<P>(), timing_param_fields<P>());
 
-const P& checked(const P& p) {
-  require_positive(kName, p.tau_acc_s, "tau_acc_s");
-  require_positive(kName, p.tau_mag_s, "tau_mag_s");
-  require_non_negative(kName, p.zeta, "zeta");
-  require_positive(kName, p.max_gyro_bias_rad_s, "max_gyro_bias_rad_s");
-  require_positive(kName, p.max_acc_error_rad, "max_acc_error_rad");
-  require_non_negative(kName, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
-  require_positive(kName, p.mag_reference_s, "mag_reference_s");
-  require_switch(kName, p.mag_rejection, "mag_rejection");
-  require_switch(kName, p.rest_bias_lowpass, "rest_bias_lowpass");
+const P& checked(const P& p, const char* name) {
+  require_positive(name, p.tau_acc_s, "tau_acc_s");
+  require_positive(name, p.tau_mag_s, "tau_mag_s");
+  require_non_negative(name, p.zeta, "zeta");
+  require_positive(name, p.max_gyro_bias_rad_s, "max_gyro_bias_rad_s");
+  require_positive(name, p.max_acc_error_rad, "max_acc_error_rad");
+  require_non_negative(name, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
+  require_positive(name, p.mag_reference_s, "mag_reference_s");
+  require_switch(name, p.mag_rejection, "mag_rejection");
+  require_switch(name, p.rest_bias_lowpass, "rest_bias_lowpass");
   return p;
 }
 
@@ -85,9 +86,10 @@ double signed_angle(const Vec3& v, const Vec3& w, const Vec3& n) { return atan2_
 
 }  // namespace
 
-SeelRuppinFilter::SeelRuppinFilter(const Params& params)
-    : OrientationFilter(kName, params),
-      params_(checked(params)),
+SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
+    : OrientationFilter(use_magnetometer ? kName : kName6, params),
+      params_(checked(params, use_magnetometer ? kName : kName6)),
+      use_magnetometer_(use_magnetometer),
       rest_(params),
       mag_detector_(params),
       rest_bias_(params) {
@@ -173,7 +175,7 @@ UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
   state_.acc_lp_mean = s.acc;
   state_.heading_known = mag_usable;
   state_.last_mag_ns = mag_usable ? s.timestamp_ns : 0;
-  state_.flags = start_flags(s.has_mag && !mag_usable);
+  state_.flags = start_flags(use_magnetometer_ && s.has_mag && !mag_usable);
   rest_.reset();
   start_mag_reference(s.timestamp_ns);
   state_.flags.resting = rest_.update(s);
@@ -182,9 +184,8 @@ UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
 
 // Eqs. 7-10 and the accelerometer part of eq. 13. The accelerometer is not normalised: the error angle
 // atan2(|a x r|, a . r) and the clipping test are scale-invariant.
-void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
-  const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);  // eq. 7: earth vertical in sensor coordinates
-  const Vec3 cross = acc.cross(r_acc);                   // |a| sin(alpha) along the correction axis
+Vec3 SeelRuppinFilter::acc_correction(const Vec3& acc, const Vec3& r_acc, double dt) {
+  const Vec3 cross = acc.cross(r_acc);  // |a| sin(alpha) along the correction axis
   const double sin2 = cross.squaredNorm();
   const double cos_err = acc.dot(r_acc);  // |a| cos(alpha)
   const double k = acc_gain_.gain(dt, coeff_.tau_acc_14);
@@ -204,14 +205,14 @@ void SeelRuppinFilter::correct_acc(const Vec3& acc, double dt) {
         clip && coeff_.acc_clip_test && sin_err * coeff_.cos_max_acc_error - cos_err * coeff_.sin_max_acc_error >= 0.0
             ? params_.max_acc_error_rad
             : (clip ? std::min(std::atan2(sin_err, cos_err), params_.max_acc_error_rad) : std::atan2(sin_err, cos_err));
-    if (alpha < 1e-15) return;
+    if (alpha < 1e-15) return Vec3::Zero();
     // At 180 deg the axis is undefined; any axis perpendicular to a is a shortest correction.
     const Vec3 axis = sin_err > 1e-12 * std::abs(cos_err) ? Vec3(cross / sin_err) : Vec3(acc.unitOrthogonal());
     rotation = (k * alpha) * axis;
   }
-  state_.q = state_.q * exp_rotation_vector(rotation);  // eq. 10 (normalised once per update)
   // Eq. 13 (b = -gyro_bias); not while initialising, when corrections remove the initial error, not a bias.
   if (!state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_acc * rotation;
+  return rotation;
 }
 
 void SeelRuppinFilter::start_mag_reference(std::uint64_t t_ns) {
@@ -244,16 +245,15 @@ bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const 
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
 // magnetometer turns the heading only.
-void SeelRuppinFilter::correct_mag(const ImuSample& s, double rate_rad_s) {
-  const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);
-  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, s.mag, r_acc, rate_rad_s)) {
+Vec3 SeelRuppinFilter::mag_correction(const ImuSample& s, const Vec3& mag, const Vec3& r_acc, double rate_rad_s) {
+  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, mag, r_acc, rate_rad_s)) {
     state_.flags.mag_rejected = true;
-    return;
+    return Vec3::Zero();
   }
-  const Vec3 m_horizontal = s.mag - s.mag.dot(r_acc) * r_acc;  // eq. 11
-  if (!(m_horizontal.squaredNorm() > 1e-6 * s.mag.squaredNorm())) {
+  const Vec3 m_horizontal = mag - mag.dot(r_acc) * r_acc;  // eq. 11
+  if (!(m_horizontal.squaredNorm() > 1e-6 * mag.squaredNorm())) {
     state_.flags.mag_rejected = true;  // field (nearly) vertical: no heading information
-    return;
+    return Vec3::Zero();
   }
   const Vec3 r_mag = earth_axis_in_sensor(state_.q, 1);  // ENU: magnetic north is earth y
   const double alpha = signed_angle(m_horizontal, r_mag, r_acc);
@@ -269,12 +269,11 @@ void SeelRuppinFilter::correct_mag(const ImuSample& s, double rate_rad_s) {
                         : state_.flags.initialising ? start_mag_gain_.gain(dt_mag, coeff_.tau_start_mag_14)
                                                     : mag_gain_.gain(dt_mag, coeff_.tau_mag_14);
   const double k = params_.mag_rejection != 0.0 ? k_full * mag_detector_.gain_factor() : k_full;
-  state_.q = state_.q * exp_rotation_vector(k * alpha * r_acc);  // eq. 12 (normalised once per update)
-  if (state_.heading_known && !state_.flags.initialising) {
-    state_.gyro_bias -= coeff_.bias_factor_mag * k * alpha * r_acc;
-  }
+  const Vec3 rotation = (k * alpha) * r_acc;  // eq. 12
+  if (state_.heading_known && !state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_mag * rotation;
   state_.heading_known = true;
   state_.last_mag_ns = s.timestamp_ns;
+  return rotation;
 }
 
 UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
@@ -289,15 +288,22 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
     state_.q = state_.q * dq;
     if (coeff_.acc_lowpass) state_.q_gyr = renormalised(state_.q_gyr * dq);
   }
+  // Both corrections are computed from the predicted orientation and applied as one rotation: each turns the
+  // estimate by at most a few milliradians, so taking one after the other would change the other's axis only at
+  // second order, and one exponential and one product are saved per sample.
+  const Vec3 r_acc = earth_axis_in_sensor(state_.q, 2);  // eq. 7: earth vertical in sensor coordinates
+  Vec3 correction = Vec3::Zero();
   if (s.has_acc && s.acc.squaredNorm() > 1e-12) {
-    correct_acc(coeff_.acc_lowpass ? lowpass_acc(s.acc, dt) : s.acc, dt);
+    correction = acc_correction(coeff_.acc_lowpass ? lowpass_acc(s.acc, dt) : s.acc, r_acc, dt);
   }
-  // Only the horizontal part of the rate turns the field's dip (a turn about the vertical keeps it).
-  if (s.has_mag) {
-    ImuSample forward = s;
-    forward.mag = mag_at_gyro_time(s, state_.gyro_bias, params_.mag_latency_s);  // the magnetometer's own delay
-    correct_mag(forward, s.has_gyr ? (s.gyr - state_.gyro_bias).cross(earth_axis_in_sensor(state_.q, 2)).norm() : 0.0);
+  if (s.has_mag && use_magnetometer_) {
+    // The magnetometer's own delay; only the horizontal part of the rate turns the field's dip (a turn about the
+    // vertical keeps it).
+    const Vec3 rate = s.has_gyr ? Vec3(s.gyr - state_.gyro_bias) : Vec3::Zero();
+    const Vec3 mag = params_.mag_latency_s > 0.0 ? lag_compensated(s.mag, rate, params_.mag_latency_s) : s.mag;
+    correction += mag_correction(s, mag, r_acc, rate.cross(r_acc).norm());
   }
+  state_.q = state_.q * exp_rotation_vector(correction);  // eqs. 10 and 12
   state_.q = renormalised(state_.q);
   const double max_bias = params_.max_gyro_bias_rad_s;
   state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);
@@ -319,6 +325,10 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
 
 std::unique_ptr<OrientationFilter> make_seel_ruppin_filter(const FilterSpec& spec) {
   return std::make_unique<SeelRuppinFilter>(bind_parameters(kName, spec, kParams));
+}
+
+std::unique_ptr<OrientationFilter> make_seel_ruppin6_filter(const FilterSpec& spec) {
+  return std::make_unique<SeelRuppinFilter>(bind_parameters(kName6, spec, kParams), false);
 }
 
 }  // namespace bsn::fusion

@@ -1,7 +1,14 @@
-// Cost of one filter update (ns per sample), 9D and 6D, for every registered filter.
-// Run: ./build/tests/bench/bsn_bench_filters --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
+// Cost of one filter update (ns per sample), 9D and 6D, for every registered filter: each benchmark runs five
+// repetitions in the same process, and the summary at the end gives each one's median and its ratio to the fastest
+// and to the reference filter (complementary, the project's plain reference) of the same kind (9D or 6D). The
+// repetitions of all benchmarks run interleaved in random order.
+// Run: ./build/tests/bench/bsn_bench_filters
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <string>
 #include <vector>
 
 #include "bsn/fusion/orientation_filter.hpp"
@@ -68,16 +75,69 @@ void update_cost(benchmark::State& state, const std::string& name, bool with_mag
   state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()));
 }
 
+constexpr int kRepetitions = 5;
+constexpr const char* kReference = "complementary";
+
+// The console output as usual, and the median real time per update of every benchmark kept for the summary.
+class MedianCollector : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(const std::vector<Run>& runs) override {
+    ConsoleReporter::ReportRuns(runs);
+    for (const Run& run : runs) {
+      if (run.run_type == Run::RT_Aggregate && run.aggregate_name == "median") {
+        median_ns[run.run_name.function_name] = run.GetAdjustedRealTime();  // the time unit is ns
+      }
+    }
+  }
+  std::map<std::string, double> median_ns;  ///< "name/9D" -> ns per update
+};
+
+void print_summary(const std::map<std::string, double>& median_ns) {
+  for (const char* kind : {"9D", "6D"}) {
+    std::vector<std::pair<std::string, double>> rows;
+    for (const auto& name : bsn::fusion::filter_names()) {
+      const auto it = median_ns.find(name + "/" + kind);
+      if (it != median_ns.end()) rows.emplace_back(name, it->second);
+    }
+    if (rows.empty()) continue;
+    const double fastest = std::min_element(rows.begin(), rows.end(), [](const auto& a, const auto& b) {
+                             return a.second < b.second;
+                           })->second;
+    const auto reference = median_ns.find(std::string(kReference) + "/" + kind);
+    std::printf("\n%s, median of %d repetitions: filter, ns per update, x fastest, x %s\n", kind, kRepetitions,
+                kReference);
+    for (const auto& [name, ns] : rows) {
+      std::printf("  %-14s %7.1f ns  %5.2fx  ", name.c_str(), ns, ns / fastest);
+      if (reference != median_ns.end()) {
+        std::printf("%5.2fx\n", ns / reference->second);
+      } else {
+        std::printf("    -\n");
+      }
+    }
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   for (const auto& name : bsn::fusion::filter_names()) {
-    benchmark::RegisterBenchmark((name + "/9D").c_str(), update_cost, name, true);
-    benchmark::RegisterBenchmark((name + "/6D").c_str(), update_cost, name, false);
+    for (const bool with_mag : {true, false}) {
+      benchmark::RegisterBenchmark((name + (with_mag ? "/9D" : "/6D")).c_str(), update_cost, name, with_mag)
+          ->Repetitions(kRepetitions)
+          ->ReportAggregatesOnly(true);
+    }
   }
-  benchmark::Initialize(&argc, argv);
-  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
-  benchmark::RunSpecifiedBenchmarks();
+  // The repetitions of all benchmarks in random order: on a shared machine the load changes within a run, and
+  // consecutive repetitions of one filter would all catch the same moment.
+  std::vector<char*> args(argv, argv + argc);
+  char interleave[] = "--benchmark_enable_random_interleaving=true";
+  args.insert(args.begin() + 1, interleave);
+  int args_count = static_cast<int>(args.size());
+  benchmark::Initialize(&args_count, args.data());
+  if (benchmark::ReportUnrecognizedArguments(args_count, args.data())) return 1;
+  MedianCollector reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  print_summary(reporter.median_ns);
   benchmark::Shutdown();
   return 0;
 }

@@ -5,8 +5,13 @@
 // Eq. 11 as printed, w_bias = 2 pi f_c * integral(p * w dt), lacks the feedback term: integrated literally it
 // would grow without bound at rest. The text calls it a low-pass filter with corner frequency f_c, so we
 // implement exactly that: d(w_bias)/dt = 2 pi f_c * p * (w - w_bias), discretised exactly for any dt.
+// By default, over the first 1 / (2 pi f_c) of still time after reset() the estimate is the running mean of the still
+// readings instead (the larger of the two gains): with nothing known yet the mean is the best estimate of a constant
+// bias, while the low-pass started from zero keeps (1 - e^-t/tau) of the bias unlearned for many seconds. A short rest
+// before motion (Fan's test A: 5 s, 3 of them usable) then yields the bias, not half of it.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -35,10 +40,12 @@ class GyroBiasLowPass {
     bool still = false;                ///< every component below omega_min at the last sample
     std::uint64_t still_since_ns = 0;  ///< start of the current still period
     bool updating = false;             ///< p of eq. 12 at the last sample
+    double averaged_s = 0.0;           ///< still time averaged since reset(), s (counted up to 1 / (2 pi f_c))
   };
 
-  /// Throws std::invalid_argument on a non-positive or non-finite parameter.
-  explicit GyroBiasLowPass(const Params& params);
+  /// Throws std::invalid_argument on a non-positive or non-finite parameter. running_mean_start = false keeps Fan's
+  /// low-pass from the first still reading on (madgwick: see there).
+  explicit GyroBiasLowPass(const Params& params, bool running_mean_start = true);
   GyroBiasLowPass() : GyroBiasLowPass(Params{}) {}
 
   /// Feeds the raw measured rate of a sample at t_ns, dt seconds after the previous one (dt <= 0 or
@@ -57,7 +64,12 @@ class GyroBiasLowPass {
     state_.updating = state_.still && t_ns - state_.still_since_ns > min_static_ns_;
     if (state_.updating && dt > 0.0 && std::isfinite(dt)) {
       if (dt != cached_dt_) cache_gain(dt);  // dt is nearly always the same from sample to sample
-      state_.bias += cached_gain_ * (gyr - state_.bias);
+      double gain = cached_gain_;
+      if (state_.averaged_s < time_constant_s_) {  // the running mean of the first still time
+        state_.averaged_s += dt;
+        gain = std::max(gain, dt / state_.averaged_s);
+      }
+      state_.bias += gain * (gyr - state_.bias);
     }
   }
   const Vec3& bias() const { return state_.bias; }
@@ -72,7 +84,8 @@ class GyroBiasLowPass {
   void cache_gain(double dt);
 
   Params params_;
-  double omega_c_ = 0.0;  ///< 2 pi f_c, rad/s
+  double omega_c_ = 0.0;          ///< 2 pi f_c, rad/s
+  double time_constant_s_ = 0.0;  ///< 1 / omega_c, s
   std::uint64_t min_static_ns_ = 0;
   double cached_dt_ = -1.0;   ///< dt of the last low-pass step
   double cached_gain_ = 0.0;  ///< 1 - exp(-omega_c dt) for cached_dt_

@@ -110,8 +110,9 @@ class SeelRuppinFilter final : public OrientationFilter {
     FilterFlags flags;
   };
 
-  /// Throws std::invalid_argument on an out-of-range parameter.
-  explicit SeelRuppinFilter(const Params& params);
+  /// Throws std::invalid_argument on an out-of-range parameter. use_magnetometer = false is "seel_ruppin6": the
+  /// heading is taken from the magnetometer at the start only (when there is one), as IECF6's.
+  explicit SeelRuppinFilter(const Params& params, bool use_magnetometer = true);
   SeelRuppinFilter() : SeelRuppinFilter(Params{}) {}
 
   // Besides the interface's rejections, update() rejects a sample with a value no sensor can produce (|acc| > 1e4
@@ -119,7 +120,7 @@ class SeelRuppinFilter final : public OrientationFilter {
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
   Vec3 gyro_bias() const override { return state_.gyro_bias; }
-  std::string_view name() const override { return "seel_ruppin"; }
+  std::string_view name() const override { return use_magnetometer_ ? "seel_ruppin" : "seel_ruppin6"; }
 
   const Params& params() const { return params_; }
   const Coefficients& coefficients() const { return coeff_; }
@@ -129,8 +130,10 @@ class SeelRuppinFilter final : public OrientationFilter {
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
   void clear() override;
-  void correct_acc(const Vec3& acc, double dt);
-  void correct_mag(const ImuSample& s, double rate_rad_s);
+  /// The rotation vector of eq. 10 (k alpha times the axis), for the earth vertical r_acc in sensor coordinates.
+  Vec3 acc_correction(const Vec3& acc, const Vec3& r_acc, double dt);
+  /// The rotation vector of eq. 12 for the reading mag of sample s (zero when it is not used).
+  Vec3 mag_correction(const ImuSample& s, const Vec3& mag, const Vec3& r_acc, double rate_rad_s);
   /// Starts learning the detector's reference field at t_ns.
   void start_mag_reference(std::uint64_t t_ns);
   /// The disturbance decision for one reading (false while the reference is being learned).
@@ -144,6 +147,7 @@ class SeelRuppinFilter final : public OrientationFilter {
   };
 
   Params params_;
+  bool use_magnetometer_;
   Coefficients coeff_;
   /// The Butterworth's transition matrix over the last dt seen (its state is dt-independent, see update()).
   struct LowPassCache {
@@ -163,7 +167,8 @@ class SeelRuppinFilter final : public OrientationFilter {
   GyroBiasLowPass rest_bias_;
 };
 
-/// Factory entry: "seel_ruppin" with the Params fields as parameter names.
+/// Factory entries: "seel_ruppin" (9D) and "seel_ruppin6" (6D), with the Params fields as parameter names.
 std::unique_ptr<OrientationFilter> make_seel_ruppin_filter(const FilterSpec& spec);
+std::unique_ptr<OrientationFilter> make_seel_ruppin6_filter(const FilterSpec& spec);
 
 }  // namespace bsn::fusion
