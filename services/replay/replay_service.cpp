@@ -149,7 +149,7 @@ int run_replay(const ReplayOptions& opt) {
       for (ReplayTrack& t : load_replay_tracks(in)) tracks.push_back(std::move(t));
   } catch (const io::IoError& e) {
     std::fprintf(stderr, "bsn replay: error: %s\n", e.what());
-    return 1;
+    return 2;  // bad input: unreadable, empty or cut short
   }
   if (!map_nodes(tracks, opt.node_map)) return 2;
 
