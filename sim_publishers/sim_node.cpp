@@ -87,7 +87,7 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   const std::string segment = !opt.segment.empty() ? opt.segment : body.size() == 1 ? body.segment(0).name : opt.node;
   ScenarioRunner runner(spec, {segment}, opt.ideal);
   services::DdsCommandFrame frame(opt.domain, "bsn sim " + opt.node);
-  auto raw_writer = frame.participant().make_writer(dds::kRawTopic);
+  auto raw_writer = frame.participant().make_writer(dds::kRawTopic, std::nullopt, opt.node);
   auto truth_writer = frame.participant().make_writer(dds::kTruthOrientationTopic);
   logging::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
                     spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain,
