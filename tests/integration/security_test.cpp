@@ -20,11 +20,13 @@
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <mutex>
 #include <sstream>
 #include <string>
 #include <string_view>
 #include <thread>
+#include <vector>
 
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/participant.hpp"
@@ -358,6 +360,61 @@ TEST_F(Security, MiddlewareErrorsStayOutOfEchoOutput) {
       << "the middleware's refusal is not in stderr:\n"
       << log;
   EXPECT_EQ(log.find('\x1b'), std::string::npos) << "terminal escapes in the log";
+}
+
+// Seven secured sensor nodes and fusion start at once on a loaded machine (two busy processes): every node joins.
+// Fast DDS 2.9.1 sometimes never completes the handshake of a pair of participants (3 of 13 secured starts once left
+// a node at 0 received for 150 s, silently); a secured node that no reader matched in 10 s says so and makes a new
+// participant. The test's own viewer does the same for itself after 20 s.
+TEST_F(Security, SecuredNodesAllJoinUnderLoad) {
+  const int domain = test_domain(86);
+  const std::vector<std::string> nodes{"pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r"};
+  ASSERT_EQ(make_pki(pki_, "hub:sensor:pelvis,thigh_l,shank_l,foot_l,thigh_r,shank_r,foot_r"), 0)
+      << read_file(pki_.string() + ".log");
+  for (int i = 0; i < 2; ++i) spawn_command("load-" + std::to_string(i), {"/bin/sh", "-c", "while :; do :; done"});
+  std::mutex mutex;
+  std::map<std::string, std::uint64_t> accepted;
+  std::unique_ptr<dds::Participant> viewer;
+  std::unique_ptr<dds::Reader<bsn::Status>> status;
+  auto connect = [&] {
+    status.reset();
+    viewer = participant_as(domain, pki_ / "viewer");
+    status = viewer->make_reader(dds::kStatusTopic, [&](const bsn::Status& st, const SampleInfo&) {
+      std::lock_guard lock(mutex);
+      for (const auto& n : st.nodes()) accepted[n.node_id()] = n.accepted();
+    });
+  };
+  auto joined = [&] {
+    std::lock_guard lock(mutex);
+    return std::count_if(nodes.begin(), nodes.end(), [&](const std::string& n) { return accepted[n] > 0; });
+  };
+  connect();
+  const std::string d = std::to_string(domain);
+  // A node that no reader matches says so loudly after 10 s and starts over on a new participant, which then joins.
+  spawn("pelvis", {"sim", "--node", "pelvis", "--domain", d, "--security", (pki_ / "hub").string()});
+  EXPECT_TRUE(wait_until(
+      [&] {
+        return read_file(log_path("pelvis")).find("error: node 'pelvis': no reader of bsn/raw matched in 10 s") !=
+               std::string::npos;
+      },
+      20s))
+      << tail(log_path("pelvis"));
+  spawn("fusion", {"fusion", "--status-period", "0.5", "--domain", d, "--security", (pki_ / "fusion").string()});
+  for (const std::string& node : nodes)
+    if (node != "pelvis") spawn(node, {"sim", "--node", node, "--domain", d, "--security", (pki_ / "hub").string()});
+  const auto start = Clock::now();
+  bool all = false;
+  for (int attempt = 0; attempt < 3 && !all; ++attempt) {
+    if (attempt > 0 && status->matched() == 0) connect();  // the viewer's own handshake, not the nodes'
+    all = wait_until([&] { return joined() == static_cast<long>(nodes.size()); }, 20s);
+  }
+  int rejoins = 0;  // besides pelvis's
+  for (const std::string& node : nodes)
+    if (node != "pelvis" && read_file(log_path(node)).find("Making a new participant") != std::string::npos) ++rejoins;
+  std::printf("[ measure  ] %ld of %zu nodes joined in %.1f s; %d made a new participant\n", joined(), nodes.size(),
+              std::chrono::duration<double>(Clock::now() - start).count(), rejoins);
+  EXPECT_TRUE(all) << joined() << " of " << nodes.size() << " secured nodes joined within 60 s";
+  status.reset();
 }
 
 // The capture sees the joint's name and the topic's name in the open (so it would catch a leak) ...
