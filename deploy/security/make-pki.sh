@@ -2,21 +2,30 @@
 # Makes a DDS-Security PKI for bsn with openssl: one certificate authority, one identity per process, and the
 # governance and permissions documents signed by that authority.
 #
-#   deploy/security/make-pki.sh [--submessages encrypt|sign|none] OUT_DIR [NAME:ROLE ...]
+#   deploy/security/make-pki.sh [--submessages encrypt|sign|none] [--body FILE] OUT_DIR [NAME:ROLE[:NODES] ...]
 #
 # ROLE is one of
-#   sensor       publishes bsn/raw (and bsn/truth/*: orientation, segment_orientation, joint_angles, for simulators)
+#   sensor       publishes bsn/raw for its NODES only (comma-separated node ids: NAME:sensor:thigh_l,shank_l for a
+#                hub with two sensors), and bsn/truth/orientation, bsn/truth/segment_orientation and
+#                bsn/truth/joint_angles, for simulators
 #   fusion       reads raw, calibration results and status; publishes orientation, joint angles, status
 #   calibration  reads raw and calibration requests; publishes calibration results and progress
 #   viewer       reads orientation, joint angles, status (and the simulator's truth): bsn view
 #   ros2-bridge  reads raw, orientation and joint angles; publishes the ROS 2 mirror (rt/tf, rt/bsn/...)
 #   operator     a calibration client: publishes requests; reads progress, results and status
 #   recorder     reads every bsn topic
-#   tester       publishes raw samples and reads every bsn topic (for tests and benchmarks, not for a lab)
-# Without NAME:ROLE arguments it makes one identity per role, named after the role. Each identity gets a folder
+#   tester       publishes raw samples of any node and reads every bsn topic (for tests and benchmarks, not a lab)
+# --body FILE adds one sensor identity per node of that body model, named sensor-NODE, allowed that node only.
+# Without NAME:ROLE arguments it makes one identity per role but sensor, named after the role, and the sensor
+# identities of --body FILE (default: the default lower body of `bsn fusion --print-body`). Each identity gets a folder
 # OUT_DIR/NAME holding what `bsn ... --security OUT_DIR/NAME` reads: ca.pem, cert.pem, key.pem, governance.p7s,
 # permissions.p7s. OUT_DIR/ca holds the authority's key: keep it off the lab machines. Running the script again
 # with new identities keeps the existing authority and re-signs the permissions for all of them.
+#
+# A sensor's node ids are DDS partitions in its permissions: Fast DDS refuses a writer of bsn/raw in any other
+# partition (locally, and at every remote reader), and fusion takes a node's samples only from writers in the
+# partition of that node. The permissions document travels in plaintext in the authentication handshake, so the node
+# ids a sensor may write, like the topic names, are visible on the network (README: what discovery reveals).
 #
 # Every sample's payload is encrypted and authenticated (AES-GCM) in any case, and discovery is encrypted.
 # --submessages chooses what also protects the RTPS submessage around each payload (writer id, sequence number):
@@ -25,42 +34,73 @@
 set -euo pipefail
 
 usage() { sed -n '2,/^set -e/p' "$0" | grep '^#' | sed 's/^# \{0,1\}//'; }
-submessages=none
-if [ "${1:-}" = "--submessages" ]; then
-  case ${2:-} in
-    encrypt|sign|none) submessages=$2; shift 2 ;;
-    *) echo "make-pki: error: --submessages takes encrypt, sign or none, not '${2:-}'" >&2; exit 2 ;;
+submessages=none body=
+while [ $# -gt 0 ]; do
+  case $1 in
+    --submessages)
+      case ${2:-} in
+        encrypt|sign|none) submessages=$2; shift 2 ;;
+        *) echo "make-pki: error: --submessages takes encrypt, sign or none, not '${2:-}'" >&2; exit 2 ;;
+      esac ;;
+    --body)
+      [ -f "${2:-}" ] || { echo "make-pki: error: --body takes a body model file, not '${2:-}'" >&2; exit 2; }
+      body=$2; shift 2 ;;
+    *) break ;;
   esac
-fi
+done
 if [ $# -lt 1 ] || [ "$1" = "-h" ] || [ "$1" = "--help" ]; then usage; exit 2; fi
 out=$1; shift
 metadata_protection=$(echo "$submessages" | tr '[:lower:]' '[:upper:]')
 identities=("$@")
-[ ${#identities[@]} -gt 0 ] || identities=(sensor:sensor fusion:fusion calibration:calibration viewer:viewer
-                                            operator:operator recorder:recorder)
 command -v openssl >/dev/null || { echo "make-pki: error: openssl is not installed (apt install openssl)" >&2; exit 1; }
+
+# The node ids of a body model, as `bsn fusion --print-body` gives them ($BSN, else bsn on the PATH, else this
+# checkout's build/bsn).
+body_nodes() {
+  local bsn=${BSN:-}
+  [ -n "$bsn" ] || bsn=$(command -v bsn || true)
+  [ -n "$bsn" ] || bsn=$(dirname "$0")/../../build/bsn
+  [ -x "$bsn" ] || { echo "make-pki: error: cannot find the bsn program to read the body model (set BSN=PATH)" >&2; exit 1; }
+  "$bsn" fusion --print-body ${body:+--body "$body"} | sed -n 's/^ *node: *\([^ #]*\).*/\1/p'
+}
+if [ -n "$body" ] || [ ${#identities[@]} -eq 0 ]; then
+  nodes=$(body_nodes) || exit 1
+  [ -n "$nodes" ] || { echo "make-pki: error: no node ids in the body model ${body:-(the default)}" >&2; exit 2; }
+  for node in $nodes; do identities+=("sensor-$node:sensor:$node"); done
+fi
+if [ $# -eq 0 ]; then
+  identities+=(fusion:fusion calibration:calibration viewer:viewer operator:operator recorder:recorder)
+fi
 
 # Topics each role may publish and subscribe to (DDS topic names; permissions list them literally).
 role_topics() {  # role -> "publish|subscribe", space-separated topic lists
   case $1 in
-    sensor)      echo "bsn/raw bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles|" ;;
+    sensor)      echo "bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles|" ;;  # bsn/raw: in its nodes' partitions
     fusion)      echo "bsn/orientation bsn/joint_angles bsn/status|bsn/raw bsn/calibration/result bsn/status" ;;
     calibration) echo "bsn/calibration/result bsn/calibration/progress bsn/status|bsn/raw bsn/calibration/request" ;;
     viewer)      echo "|bsn/orientation bsn/joint_angles bsn/status bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles" ;;
     ros2-bridge) echo "rt/tf rt/bsn/*|bsn/raw bsn/orientation bsn/joint_angles" ;;
     operator)    echo "bsn/calibration/request|bsn/calibration/progress bsn/calibration/result bsn/status" ;;
     recorder)    echo "|bsn/*" ;;
-    tester)      echo "bsn/raw bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles bsn/calibration/request|bsn/*" ;;
+    tester)      echo "bsn/truth/orientation bsn/truth/segment_orientation bsn/truth/joint_angles bsn/calibration/request|bsn/*" ;;  # + bsn/raw
     *) return 1 ;;
   esac
 }
 
 for id in "${identities[@]}"; do
-  name=${id%%:*}; role=${id#*:}
+  name=${id%%:*}; rest=${id#*:}; role=${rest%%:*}; id_nodes=${rest#*:}; [ "$id_nodes" != "$rest" ] || id_nodes=
   if [ "$name" = "$id" ] || ! [[ $name =~ ^[A-Za-z0-9_.-]+$ ]] || [ "$name" = ca ]; then
     echo "make-pki: error: '$id' is not NAME:ROLE (NAME of letters, digits, '_', '.', '-', not 'ca')" >&2; exit 2
   fi
   role_topics "$role" >/dev/null || { echo "make-pki: error: unknown role '$role' in '$id'" >&2; exit 2; }
+  if [ "$role" = sensor ]; then
+    # Node ids become partition names, which DDS matches as patterns: plain names only.
+    [[ $id_nodes =~ ^[A-Za-z0-9_.-]+(,[A-Za-z0-9_.-]+)*$ ]] || {
+      echo "make-pki: error: '$id': a sensor names the node ids it may write, NAME:sensor:NODE[,NODE...] (letters," \
+           "digits, '_', '.', '-'), or use --body FILE" >&2; exit 2; }
+  elif [ -n "$id_nodes" ]; then
+    echo "make-pki: error: '$id': only a sensor identity names nodes" >&2; exit 2
+  fi
 done
 
 mkdir -p "$out/ca"
@@ -105,11 +145,13 @@ cat > "$out/ca/governance.xml" <<XML
 XML
 
 topic_list() { local t; for t in $1; do printf '<topic>%s</topic>' "$t"; done; }
+partition_list() { local p parts; IFS=, read -r -a parts <<< "$1"; for p in "${parts[@]}"; do printf '<partition>%s</partition>' "$p"; done; }
 
-# Identities made earlier stay in the permissions (their role is remembered in OUT_DIR/NAME/role).
+# Identities made earlier stay in the permissions (their role and nodes are remembered in OUT_DIR/NAME/).
 for id in "${identities[@]}"; do
-  name=${id%%:*}; role=${id#*:}
+  name=${id%%:*}; rest=${id#*:}; role=${rest%%:*}; id_nodes=${rest#*:}; [ "$id_nodes" != "$rest" ] || id_nodes=
   mkdir -p "$out/$name"; echo "$role" > "$out/$name/role"
+  if [ -n "$id_nodes" ]; then echo "$id_nodes" > "$out/$name/nodes"; else rm -f "$out/$name/nodes"; fi
 done
 
 {
@@ -126,8 +168,15 @@ done
     echo "      <validity><not_before>2020-01-01T00:00:00</not_before><not_after>2036-01-01T00:00:00</not_after></validity>"
     echo "      <allow_rule>"
     echo "        $domains"
+    raw_partitions=
+    [ "$role" = sensor ] && raw_partitions=$(cat "$dir/nodes" 2>/dev/null || true)
+    [ "$role" = tester ] && raw_partitions='*'
+    [ -n "$raw_partitions" ] &&
+      echo "        <publish><topics><topic>bsn/raw</topic></topics><partitions>$(partition_list "$raw_partitions")</partitions></publish>"
     [ -n "$pub" ] && echo "        <publish><topics>$(topic_list "$pub")</topics></publish>"
-    [ -n "$sub" ] && echo "        <subscribe><topics>$(topic_list "$sub")</topics></subscribe>"
+    # Readers of bsn/raw read every node's partition ('*' also allows the default partition of the other topics).
+    [ -n "$sub" ] &&
+      echo "        <subscribe><topics>$(topic_list "$sub")</topics><partitions><partition>*</partition></partitions></subscribe>"
     echo "      </allow_rule>"
     echo "      <default>DENY</default>"
     echo "    </grant>"

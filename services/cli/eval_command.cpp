@@ -111,7 +111,7 @@ int run_eval(const EvalOptions& opt) {
     } catch (const io::IoError& e) {
       bar.finish();
       std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
-      exit_code = 1;
+      exit_code = 2;  // bad input (unreadable, empty, cut short), as for a missing file
       done += filters.size();
       continue;
     }
@@ -125,7 +125,7 @@ int run_eval(const EvalOptions& opt) {
       if (results.back().non_finite > 0) {
         std::fprintf(stderr, "bsn eval: error: %s gave %zu non-finite orientations on %s\n", label.c_str(),
                      results.back().non_finite, file.string().c_str());
-        exit_code = 1;
+        exit_code = std::max(exit_code, 1);
       }
       ++done;
     }

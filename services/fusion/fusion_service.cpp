@@ -41,7 +41,9 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
       accepted_at_window_start_(fusion_.body().segments.size(), 0),
       rate_hz_(fusion_.body().segments.size(), 0.0),
       calibration_id_(fusion_.body().segments.size()),
-      conflict_logged_ns_(fusion_.body().segments.size(), 0) {
+      conflict_logged_ns_(fusion_.body().segments.size(), 0),
+      not_permitted_(fusion_.body().segments.size(), 0),
+      not_permitted_logged_ns_(fusion_.body().segments.size(), 0) {
   if (options_.process_id.empty()) options_.process_id = default_process_id();
   // --best-effort switches both estimate topics from their own delivery to BEST_EFFORT.
   const auto estimate = [this](const auto& topic) {
@@ -57,10 +59,22 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
       dds::kStatusTopic, [this](const bsn::Status& st, const eprosima::fastdds::dds::SampleInfo&) { on_status(st); });
   // The raw reader goes last: its callback may fire as soon as it exists.
   // Each sample's writer goes with it: a node's samples are taken from one writer at a time.
+  // Samples of nodes on no segment are counted and dropped before they enter the reader's history, so however many
+  // ids a writer invents, none takes one of the reader's instances (max_instances) from a node of the body, and
+  // each is counted when it arrives, not when (or if) its writer's next admitted sample shows a gap.
   raw_reader_ = participant_.make_reader(
-      dds::kRawTopic, [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo& info) {
-        on_raw(raw, dds::source_id(info.sample_identity.writer_guid()));
-      });
+      dds::kRawTopic,
+      [this](const bsn::RawSample& raw, const eprosima::fastdds::dds::SampleInfo& info) {
+        // Secured, each node's samples come only from writers in its partition: an identity with the permission
+        // for other nodes cannot take this one over, even after its own writer went stale.
+        const auto& writer = info.sample_identity.writer_guid();
+        if (participant_.secured() && !participant_.writer_may_write_node(writer, raw.node_id())) {
+          on_not_permitted(raw, writer);
+          return;
+        }
+        on_raw(raw, dds::source_id(writer));
+      },
+      std::nullopt, [this](const bsn::RawSample& raw) { return admit_raw(raw); });
   // Live calibrations (TRANSIENT_LOCAL: the ones published before this start arrive too and override the body
   // file's).
   calibration_reader_ = participant_.make_reader(
@@ -135,6 +149,33 @@ void FusionService::on_alignment(const bsn::CalibrationResult& r) {
   logging::log_info("node '", spec.node, "' (", spec.name, "): alignment '", r.request_id(), "' (",
                     logging::printable(r.alignment_source()),
                     ") applied from its next sample on: bsn/orientation reports the segment frame");
+  status_due_ = true;
+}
+
+bool FusionService::admit_raw(const bsn::RawSample& raw) {
+  if (fusion_.segment_of(raw.node_id())) return true;  // the body model does not change: no lock needed
+  std::lock_guard lock(mutex_);
+  const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)},
+                                                  dds::monotonic_ns(), fusion::SourceId{});  // counted there
+  if (r.new_unknown_node)
+    logging::log_warn("samples from node '", logging::printable(raw.node_id()),
+                      "', which is on no segment of the body model; ignored");
+  return false;
+}
+
+void FusionService::on_not_permitted(const bsn::RawSample& raw, const eprosima::fastrtps::rtps::GUID_t& writer) {
+  std::lock_guard lock(mutex_);
+  const auto segment = fusion_.segment_of(raw.node_id());
+  if (!segment) return;  // admit_raw let only the body's nodes in
+  ++not_permitted_[*segment];
+  const std::uint64_t now = dds::monotonic_ns();
+  std::uint64_t& logged = not_permitted_logged_ns_[*segment];
+  if (logged != 0 && now - logged < kConflictLogPeriodNs) return;
+  logged = now;
+  const fusion::SegmentSpec& spec = fusion_.body().segments[*segment];
+  logging::log_warn("node '", spec.node, "' (", spec.name, "): samples from writer ", dds::writer_name(writer),
+                    ", which its permissions do not allow to write this node ", "(its DDS partition is not '",
+                    spec.node, "'), rejected as not_permitted");
   status_due_ = true;
 }
 
@@ -290,6 +331,11 @@ bsn::Status FusionService::make_status(std::uint64_t now) {
       bsn::ReasonCount& rc = n.rejected().emplace_back();
       rc.reason(r < fusion::kRejectionReasonCount ? std::string(fusion::rejection_reason_name(r)) : "filter_rejected");
       rc.count(r < fusion::kRejectionReasonCount ? c.rejected[r] : state.filter_rejected);
+    }
+    if (participant_.secured()) {
+      bsn::ReasonCount& rc = n.rejected().emplace_back();
+      rc.reason("not_permitted");
+      rc.count(not_permitted_[i]);
     }
     n.clock_resets(c.clock_resets);
     n.stale(state.stale);

@@ -34,6 +34,10 @@ class FusionService {
 
  private:
   void on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer);  ///< called from the DDS thread
+  /// Before a raw sample enters the reader (DDS receive thread): false, and counted, for a node on no segment.
+  bool admit_raw(const bsn::RawSample& raw);
+  /// A sample of a body node from a writer the permissions do not allow to write it: counted, never fused.
+  void on_not_permitted(const bsn::RawSample& raw, const eprosima::fastrtps::rtps::GUID_t& writer);
   void log_source_events(const fusion::SampleResult& r, std::uint64_t now_ns);
   void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
   void on_alignment(const bsn::CalibrationResult& result);    ///< a successful alignment, from on_calibration
@@ -76,6 +80,10 @@ class FusionService {
   std::string last_calibration_id_;
   /// Per segment, when a conflicting writer was last logged (0: never): at most one line per kConflictLogPeriodNs.
   std::vector<std::uint64_t> conflict_logged_ns_;
+  /// Per segment, samples of the node from a writer whose DDS partition does not name it (secured only): another
+  /// identity's writer, refused (reported as rejected "not_permitted"), and when that was last logged.
+  std::vector<std::uint64_t> not_permitted_;
+  std::vector<std::uint64_t> not_permitted_logged_ns_;
   static constexpr std::uint64_t kConflictLogPeriodNs = 10'000'000'000;
   bsn::Orientation orientation_msg_;
   bsn::JointAngles joint_msg_;

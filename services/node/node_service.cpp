@@ -124,7 +124,7 @@ class NodePublisher {
   NodePublisher(dds::Participant& participant, const NodeOptions& opt, io::AxisMap map)
       : opt_(opt),
         map_(map),
-        raw_writer_(participant.make_writer(dds::kRawTopic)),
+        raw_writer_(participant.make_writer(dds::kRawTopic, std::nullopt, opt.node)),
         status_writer_(participant.make_writer(dds::kStatusTopic)) {
     raw_.node_id(opt.node);
     char host[128] = {};

@@ -149,7 +149,7 @@ int run_replay(const ReplayOptions& opt) {
       for (ReplayTrack& t : load_replay_tracks(in)) tracks.push_back(std::move(t));
   } catch (const io::IoError& e) {
     std::fprintf(stderr, "bsn replay: error: %s\n", e.what());
-    return 1;
+    return 2;  // bad input: unreadable, empty or cut short
   }
   if (!map_nodes(tracks, opt.node_map)) return 2;
 
@@ -171,7 +171,16 @@ int run_replay(const ReplayOptions& opt) {
   const std::uint64_t loop_span = t_end - t0 + mean_dt;
 
   DdsCommandFrame frame(opt.domain, "bsn replay");
-  auto writer = frame.participant().make_writer(dds::kRawTopic);
+  // One writer for every node, or, secured, one per node: each in its node's partition (Participant::make_writer).
+  std::vector<std::shared_ptr<dds::Writer<bsn::RawSample>>> writers;
+  for (const ReplayTrack& t : tracks) {
+    if (!writers.empty() && !frame.participant().secured()) {
+      writers.push_back(writers.front());
+      continue;
+    }
+    writers.push_back(frame.participant().make_writer(dds::kRawTopic, std::nullopt, t.node));
+  }
+  dds::Writer<bsn::RawSample>* writer = writers.front().get();
   if (opt.readers > 0) {
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.wait_s);
     while (writer->matched() < opt.readers && std::chrono::steady_clock::now() < deadline) {
@@ -225,7 +234,7 @@ int run_replay(const ReplayOptions& opt) {
         m.mag()[c] = t.mag[3 * i + c];
       }
       m.channels(t.channels[i]);
-      if (writer->write(m)) {
+      if (writers[best]->write(m)) {
         ++published;
       } else {
         ++write_failures;

@@ -69,28 +69,73 @@ int send_error(mg_connection* conn, int code, const char* text) {
   return code;
 }
 
+constexpr const char* kTokenCookie = "bsn_view_token";
+
+// Compares without an early exit, so the time taken says nothing about how much of a guess was right.
+bool same_secret(const std::string& a, const std::string& b) {
+  unsigned char differ = a.size() == b.size() ? 0 : 1;
+  for (std::size_t i = 0; i < a.size(); ++i) differ |= static_cast<unsigned char>(a[i] ^ (i < b.size() ? b[i] : 0));
+  return differ == 0;
+}
+
+std::string remote_address(const mg_connection* conn) {
+  const mg_request_info* info = mg_get_request_info(conn);
+  return info != nullptr ? info->remote_addr : "";
+}
+
+ViewServer* server_of(const mg_connection* conn) {
+  return static_cast<ViewServer*>(mg_get_user_data(mg_get_context(conn)));
+}
+
 }  // namespace
+
+bool ViewServer::token_ok(const mg_connection* conn, bool& set_cookie) const {
+  set_cookie = false;
+  if (options_.token.empty()) return true;
+  const mg_request_info* info = mg_get_request_info(conn);
+  char given[256] = "";
+  if (info->query_string != nullptr &&
+      mg_get_var(info->query_string, std::strlen(info->query_string), "token", given, sizeof given) > 0) {
+    set_cookie = same_secret(given, options_.token);
+    return set_cookie;
+  }
+  const char* cookies = mg_get_header(conn, "Cookie");
+  return cookies != nullptr && mg_get_cookie(cookies, kTokenCookie, given, sizeof given) > 0 &&
+         same_secret(given, options_.token);
+}
+
+// Every connection ends here, also a WebSocket whose handshake failed after on_ws_connect accepted it.
+void ViewServer::on_connection_close(const mg_connection* conn) {
+  ViewServer* self = server_of(conn);
+  if (self == nullptr) return;
+  std::lock_guard lock(self->mutex_);
+  const auto ws = self->websocket_peer_.find(conn);
+  if (ws == self->websocket_peer_.end()) return;
+  if (const auto peer = self->websockets_of_.find(ws->second);
+      peer != self->websockets_of_.end() && --peer->second <= 0)
+    self->websockets_of_.erase(peer);
+  self->websocket_peer_.erase(ws);
+}
 
 ViewServer::ViewServer(Options options) : options_(std::move(options)) {
   const std::string listen = options_.bind + ":" + std::to_string(options_.port);
-  // Each WebSocket holds a civetweb worker thread for its lifetime: room for the 20+ browsers of a lab.
-  const char* config[] = {"listening_ports",
-                          listen.c_str(),
-                          "num_threads",
-                          "64",
-                          "request_timeout_ms",
-                          "10000",  // a client that sends half a request is cut off
+  const std::string threads = std::to_string(options_.max_connections);
+  const std::string request_timeout = std::to_string(options_.request_timeout_ms);
+  const std::string ping = std::to_string(options_.websocket_ping_ms);
+  // Each connection, a WebSocket for its whole life and a page request until it is answered or times out, holds one
+  // civetweb worker thread; the limits in Options keep some of them for page requests whatever one client does.
+  const char* config[] = {"listening_ports", listen.c_str(), "num_threads", threads.c_str(), "request_timeout_ms",
+                          request_timeout.c_str(),  // a client that sends half a request is cut off
                           "max_request_size",
                           "8192",  // request line + headers; larger gets 413
-                          "enable_keep_alive",
-                          "no",
-                          "enable_directory_listing",
-                          "no",
-                          "websocket_timeout_ms",
-                          "3600000",  // a browser only listens: no read timeout
-                          nullptr};
+                          "enable_keep_alive", "no", "enable_directory_listing", "no",
+                          // The page only listens; civetweb pings a silent WebSocket every websocket_timeout_ms and
+                          // closes it after 6 unanswered pings (MG_MAX_UNANSWERED_PING), so one that does not even
+                          // answer pings (not a browser) frees its worker within seconds.
+                          "websocket_timeout_ms", ping.c_str(), "enable_websocket_ping_pong", "yes", nullptr};
   mg_callbacks callbacks{};
   callbacks.log_message = [](const mg_connection*, const char*) { return 1; };  // quiet: errors come from mg_start2
+  callbacks.connection_close = &ViewServer::on_connection_close;
   mg_init_data init{};
   init.callbacks = &callbacks;
   init.user_data = this;
@@ -124,18 +169,52 @@ int ViewServer::on_http(mg_connection* conn, void* self_ptr) {
   std::string path = info->request_uri ? info->request_uri : "";
   if (const auto q = path.find('?'); q != std::string::npos) path.resize(q);
   if (path == "/") path = "/index.html";
+  bool set_cookie = false;
+  if (!self->token_ok(conn, set_cookie)) {
+    ++self->refused_token_;
+    return send_error(conn, 401, "this view needs its token: open the URL bsn view printed, with ?token=...");
+  }
   const auto it = self->options_.assets.find(path);
   if (it == self->options_.assets.end()) return send_error(conn, 404, "not found");
   const Asset& asset = it->second;
+  // The token in the URL becomes a cookie for the page's scripts and its WebSocket (same origin only).
+  const std::string cookie = set_cookie ? std::string("Set-Cookie: ") + kTokenCookie + "=" + self->options_.token +
+                                              "; Path=/; HttpOnly; SameSite=Strict\r\n"
+                                        : "";
   mg_printf(conn,
             "HTTP/1.1 200 OK\r\nContent-Type: %s\r\nContent-Length: %zu\r\nCache-Control: no-cache\r\n"
-            "X-Content-Type-Options: nosniff\r\nConnection: close\r\n\r\n",
-            asset.content_type.c_str(), asset.body.size());
+            "X-Content-Type-Options: nosniff\r\n%sConnection: close\r\n\r\n",
+            asset.content_type.c_str(), asset.body.size(), cookie.c_str());
   if (method == "GET") mg_write(conn, asset.body.data(), asset.body.size());
   return 200;
 }
 
-int ViewServer::on_ws_connect(const mg_connection*, void*) { return 0; }  // 0: accept
+int ViewServer::on_ws_connect(const mg_connection* conn, void* self_ptr) {
+  auto* self = static_cast<ViewServer*>(self_ptr);
+  // Refusals answer in plain HTTP (the handshake has not happened) and return non-zero: civetweb closes.
+  auto* writable = const_cast<mg_connection*>(conn);
+  bool set_cookie = false;
+  if (!self->token_ok(conn, set_cookie)) {
+    ++self->refused_token_;
+    send_error(writable, 401, "this view needs its token");
+    return 1;
+  }
+  const std::string address = remote_address(conn);
+  {
+    std::lock_guard lock(self->mutex_);
+    int& of_address = self->websockets_of_[address];
+    if (static_cast<int>(self->websocket_peer_.size()) < self->options_.max_websockets &&
+        of_address < self->options_.max_websockets_per_client) {
+      ++of_address;
+      self->websocket_peer_[conn] = address;
+      return 0;  // accept
+    }
+    if (of_address == 0) self->websockets_of_.erase(address);
+  }
+  ++self->refused_busy_;
+  send_error(writable, 503, "too many live views open at once");
+  return 1;
+}
 
 void ViewServer::on_ws_ready(mg_connection* conn, void* self_ptr) {
   auto* self = static_cast<ViewServer*>(self_ptr);
@@ -198,6 +277,8 @@ ViewServer::Stats ViewServer::stats() const {
     s.frames_sent += client->frames_sent.load();
   }
   s.frames_received = frames_received_.load();
+  s.refused_busy = refused_busy_.load();
+  s.refused_token = refused_token_.load();
   return s;
 }
 

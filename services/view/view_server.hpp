@@ -41,6 +41,21 @@ class ViewServer {
     /// truth and joint angles); one frame per message costs 20 browsers about twice the writes.
     double gather_ms = 2.0;
     std::map<std::string, Asset> assets;  ///< URL path ("/index.html") -> what it serves; "/" serves "/index.html"
+    /// Connections served at once (civetweb's worker threads; each WebSocket holds one for its life). More wait in
+    /// the kernel's listen queue until one ends.
+    int max_connections = 128;
+    /// WebSockets at once, of all browsers: the rest of max_connections always serves page requests.
+    int max_websockets = 64;
+    /// WebSockets at once from one address (a lab's browsers come from their own machines).
+    int max_websockets_per_client = 8;
+    /// A request whose line and headers have not all come within this is cut off, ms.
+    int request_timeout_ms = 3000;
+    /// A WebSocket silent this long is pinged; one silent for 6 pings more (a browser answers every ping) is
+    /// closed, ms.
+    int websocket_ping_ms = 1000;
+    /// When not empty, every request needs it: `?token=...` on the page's URL (which sets a cookie for the rest of
+    /// the page's requests and its WebSocket) or that cookie.
+    std::string token;
     /// The first messages of a new browser. Called without the server's lock, so it may take locks that are held
     /// around broadcast().
     std::function<std::vector<std::string>()> snapshot;
@@ -50,6 +65,8 @@ class ViewServer {
     std::uint64_t dropped = 0;          ///< messages dropped for slow browsers, all browsers since the start
     std::uint64_t frames_sent = 0;      ///< WebSocket frames written
     std::uint64_t frames_received = 0;  ///< frames browsers sent (ignored)
+    std::uint64_t refused_busy = 0;     ///< WebSockets refused (503) for the per-address or total limit
+    std::uint64_t refused_token = 0;    ///< requests refused (401) without the token
   };
 
   /// Starts listening; throws ViewServerError.
@@ -72,12 +89,19 @@ class ViewServer {
   static void on_ws_ready(mg_connection* conn, void* self);
   static int on_ws_data(mg_connection* conn, int bits, char* data, std::size_t len, void* self);
   static void on_ws_close(const mg_connection* conn, void* self);
+  static void on_connection_close(const mg_connection* conn);
+  /// True if the request carries the token (or none is needed); `set_cookie` then says whether it came in the URL.
+  bool token_ok(const mg_connection* conn, bool& set_cookie) const;
 
   Options options_;
   mg_context* ctx_ = nullptr;
   int port_ = 0;
   mutable std::mutex mutex_;
   std::map<const mg_connection*, std::shared_ptr<Client>> clients_;
+  std::map<std::string, int> websockets_of_;                    ///< WebSockets open, by remote address
+  std::map<const mg_connection*, std::string> websocket_peer_;  ///< WebSockets accepted and not yet closed
+  std::atomic<std::uint64_t> refused_busy_{0};
+  std::atomic<std::uint64_t> refused_token_{0};
   std::atomic<std::uint64_t> dropped_closed_{0};  ///< drops of browsers that have gone
   std::atomic<std::uint64_t> frames_sent_closed_{0};
   std::atomic<std::uint64_t> frames_received_{0};

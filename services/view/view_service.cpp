@@ -1,8 +1,10 @@
 #include "view_service.hpp"
 
+#include <cctype>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <mutex>
 #include <sstream>
@@ -52,6 +54,15 @@ std::map<std::string, ViewServer::Asset> view_assets() {
   return assets;
 }
 
+// A token travels in a URL and a cookie: URL-safe characters only, and long enough not to be guessed.
+std::string token_problem(const std::string& token) {
+  if (token.size() < 16) return "the token must have at least 16 characters";
+  for (const char c : token)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '.' && c != '_' && c != '~' && c != '-')
+      return "the token may hold only A-Z a-z 0-9 . _ ~ -";
+  return "";
+}
+
 int run_view(const ViewOptions& opt) {
   logging::set_log_identity("view");
   std::signal(SIGPIPE, SIG_IGN);  // a browser that goes mid-write is an error return, not the end of the process
@@ -61,6 +72,10 @@ int run_view(const ViewOptions& opt) {
   server_options.bind = opt.bind;
   server_options.port = opt.port;
   server_options.assets = view_assets();
+  server_options.token = opt.token;
+  if (opt.token.empty() && opt.bind.rfind("127.", 0) != 0 && opt.bind != "::1" && opt.bind != "localhost")
+    logging::log_warn("listening on ", opt.bind, " without --token: anyone who reaches this address sees the body ",
+                      "live (health data); give --token (or BSN_VIEW_TOKEN) to require one");
   server_options.snapshot = [&] {
     std::lock_guard lock(state_mutex);
     return state.snapshot();
@@ -99,12 +114,15 @@ int run_view(const ViewOptions& opt) {
       dds::kStatusTopic, [&](const bsn::Status& s, const SampleInfo&) { pass_on([&] { return state.on_status(s); }); });
 
   const std::string host = opt.bind == "0.0.0.0" ? "localhost" : opt.bind;
-  std::printf("bsn view: http://%s:%d/ (domain %d; Ctrl-C stops)\n", host.c_str(), server->port(), opt.domain);
+  const std::string query = opt.token.empty() ? "" : "?token=" + opt.token;
+  std::printf("bsn view: http://%s:%d/%s (domain %d; Ctrl-C stops)\n", host.c_str(), server->port(), query.c_str(),
+              opt.domain);
   std::fflush(stdout);
 
   // Every 5 s: browsers, and the messages dropped for slow ones (if any).
   auto next_report = std::chrono::steady_clock::now() + std::chrono::seconds(5);
   std::uint64_t reported_drops = 0;
+  std::uint64_t reported_refusals = 0;
   const int code = frame.run_ticks(std::chrono::milliseconds(100), [&]() -> std::optional<int> {
     if (std::chrono::steady_clock::now() < next_report) return std::nullopt;
     next_report += std::chrono::seconds(5);
@@ -113,6 +131,11 @@ int run_view(const ViewOptions& opt) {
       logging::log_warn(s.clients, " browsers; ", s.dropped - reported_drops,
                         " messages dropped for slow browsers in the last 5 s (", s.dropped, " in all)");
       reported_drops = s.dropped;
+    }
+    if (s.refused_busy + s.refused_token != reported_refusals) {
+      logging::log_warn("connections refused since the start: ", s.refused_busy,
+                        " over a limit (per address or in all), ", s.refused_token, " without the token");
+      reported_refusals = s.refused_busy + s.refused_token;
     }
     return std::nullopt;
   });
@@ -143,8 +166,21 @@ Command view_command() {
             ->capture_default_str()
             ->check(number_in(0, 65535));
         cmd->add_option("--bind", opt->bind, "address to listen on (0.0.0.0: every interface)")->capture_default_str();
+        cmd->add_option("--token", opt->token,
+                        "require this token on every request (at least 16 of A-Z a-z 0-9 . _ ~ -); the page's "
+                        "URL carries it once (default: $BSN_VIEW_TOKEN)")
+            ->check(token_problem);
         add_domain_option(cmd, opt->domain);
-        return [opt] { return run_view(*opt); };
+        return [opt] {
+          if (const char* env = std::getenv("BSN_VIEW_TOKEN"); opt->token.empty() && env != nullptr && *env) {
+            if (const std::string why = token_problem(env); !why.empty()) {
+              std::fprintf(stderr, "bsn view: error: BSN_VIEW_TOKEN: %s\n", why.c_str());
+              return 2;
+            }
+            opt->token = env;
+          }
+          return run_view(*opt);
+        };
       }};
 }
 

@@ -506,7 +506,15 @@ class Bench {
           dds::kOrientationTopic, [&rx](const bsn::Orientation& o, const SampleInfo&) { rx.on_orientation(o); });
       auto status_reader = participant.make_reader(
           dds::kStatusTopic, [&status](const bsn::Status& s, const SampleInfo&) { status->on_status(s); });
-      auto writer = participant.make_writer(dds::kRawTopic);
+      // Open: one writer for every node. Secured: one per node, each in its node's DDS partition (the tester
+      // identity may write any), as N sensor processes would.
+      std::vector<std::shared_ptr<dds::Writer<bsn::RawSample>>> writers;
+      for (std::size_t i = 0; i < un; ++i)
+        writers.push_back(
+            i > 0 && !participant.secured()
+                ? writers.front()
+                : std::shared_ptr(participant.make_writer(dds::kRawTopic, std::nullopt, "n" + std::to_string(i))));
+      auto& writer = writers.front();
       NodeSet nodes(un, opt_.rate_hz);
 
       // Ticks run on one absolute schedule from t0, through discovery, warm-up and measurement.
@@ -521,10 +529,10 @@ class Bench {
           for (std::size_t i = 0; i < un; ++i) {
             const std::uint64_t at = due + i * period_ns / un;
             if (at > dds::monotonic_ns() + 20000 && !sleep_until_ns(at)) return false;
-            nodes.write(i, *writer);
+            nodes.write(i, *writers[i]);
           }
         } else {
-          for (std::size_t i = 0; i < un; ++i) nodes.write(i, *writer);
+          for (std::size_t i = 0; i < un; ++i) nodes.write(i, *writers[i]);
         }
         end_ns = dds::monotonic_ns();
         ++k;

@@ -66,8 +66,20 @@ TEST_F(EvalCommand, ClearErrors) {
   EXPECT_EQ(exit_code(run("missing", {"eval", (dir() / "nope.hdf5").string()})), 2);
   EXPECT_NE(read_file(log_path("missing")).find("nope.hdf5: no such file"), std::string::npos);
   write_file(dir() / "broken.hdf5", "not an hdf5 file");
-  EXPECT_EQ(exit_code(run("broken", {"eval", (dir() / "broken.hdf5").string(), "--filter", "complementary"})), 1);
+  EXPECT_EQ(exit_code(run("broken", {"eval", (dir() / "broken.hdf5").string(), "--filter", "complementary"})), 2);
   EXPECT_NE(read_file(log_path("broken")).find("broken.hdf5: cannot open as HDF5"), std::string::npos);
+  // A file in the BROAD layout with no samples, and a real trial cut short: bad input, not an empty score.
+  {
+    io::Recording empty;
+    empty.sampling_rate_hz = 100;
+    io::write_broad_hdf5((dir() / "empty.hdf5").string(), empty);
+  }
+  EXPECT_EQ(exit_code(run("empty", {"eval", (dir() / "empty.hdf5").string(), "--filter", "complementary"})), 2);
+  EXPECT_NE(read_file(log_path("empty")).find("empty.hdf5: fewer than two samples"), std::string::npos)
+      << read_file(log_path("empty"));
+  const std::string cut = write_trial("cut", 5);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) / 2);
+  EXPECT_EQ(exit_code(run("cut", {"eval", cut, "--filter", "complementary"})), 2) << read_file(log_path("cut"));
 }
 
 }  // namespace

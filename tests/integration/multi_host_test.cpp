@@ -445,5 +445,123 @@ TEST_F(MultiHost, RogueSimIsAConflictingSource) {
       << "the fusion log does not name the rogue's writer " << rogue_writer;
 }
 
+// Secured, per-node permissions: the real sensors' hub may write all seven nodes; a second hub has a valid sensor
+// key for shank_r only. Its `bsn sim --node thigh_l` fails at start, and its writer in its own partition that
+// writes thigh_l samples gets none of them fused: not while thigh_l flows, not while the sensors' link is down
+// and thigh_l is stale (the takeover per-role permissions allowed), and thigh_l comes back from its own sensor.
+TEST_F(MultiHost, SecuredTakeoverByAnotherIdentityIsRefusedAndCounted) {
+  const int domain = test_domain(85);
+  const std::string pki = (dir() / "pki").string();
+  std::string all_nodes;
+  for (const std::string& node : kNodes) all_nodes += (all_nodes.empty() ? "" : ",") + node;
+  ASSERT_TRUE(run(std::string(BSN_DEPLOY_DIR) + "/security/make-pki.sh '" + pki + "' hub1:sensor:" + all_nodes +
+                  " hub2:sensor:shank_r fusion:fusion viewer:viewer"));
+  std::mutex mutex;
+  struct Thigh {
+    std::uint64_t accepted = 0, not_permitted = 0, conflicting = 0, handovers = 0;
+    bool stale = false;
+  } thigh;
+  auto snapshot = [&] {
+    std::lock_guard lock(mutex);
+    return thigh;
+  };
+  std::unique_ptr<dds::Reader<bsn::Status>> status_reader;
+  std::unique_ptr<dds::Participant> rogue;
+  std::unique_ptr<dds::Writer<bsn::RawSample>> rogue_raw;
+  // The test's own participants: a viewer of fusion's status, and the second hub's writer in its own partition.
+  auto connect = [&] {
+    status_reader.reset();
+    viewer_.reset();
+    rogue_raw.reset();
+    rogue.reset();
+    setenv("BSN_SECURITY_DIR", (pki + "/viewer").c_str(), 1);
+    const bool entered = run_in_namespace(hosts_->ns("viewer"), [&] {
+      viewer_ = std::make_unique<dds::Participant>(dds::Participant::Options{domain, "multi-host viewer"});
+      status_reader = viewer_->make_reader(dds::kStatusTopic, [&](const bsn::Status& st, const SampleInfo&) {
+        std::lock_guard lock(mutex);
+        for (const auto& n : st.nodes()) {
+          if (n.node_id() != "thigh_l") continue;
+          thigh.accepted = n.accepted();
+          thigh.stale = n.stale();
+          thigh.handovers = n.source_handovers();
+          for (const auto& r : n.rejected()) {
+            if (r.reason() == "not_permitted") thigh.not_permitted = r.count();
+            if (r.reason() == "conflicting_source") thigh.conflicting = r.count();
+          }
+        }
+      });
+    });
+    setenv("BSN_SECURITY_DIR", (pki + "/hub2").c_str(), 1);
+    const bool rogue_entered = run_in_namespace(hosts_->ns("rogue"), [&] {
+      rogue = std::make_unique<dds::Participant>(dds::Participant::Options{domain, "multi-host rogue"});
+      rogue_raw = rogue->make_writer(dds::kRawTopic, std::nullopt, "shank_r");
+    });
+    unsetenv("BSN_SECURITY_DIR");
+    return entered && rogue_entered;
+  };
+  ASSERT_TRUE(connect()) << "cannot enter the viewer's or the rogue's namespace";
+
+  const std::string d = std::to_string(domain);
+  spawn_on("fusion", "fusion", {"fusion", "--status-period", "0.5", "--domain", d, "--security", pki + "/fusion"});
+  for (const std::string& node : kNodes)
+    spawn_on("sensors", "sim-" + node, {"sim", "--node", node, "--domain", d, "--security", pki + "/hub1"});
+  spawn_on("rogue", "rogue-sim", {"sim", "--node", "thigh_l", "--domain", d, "--security", pki + "/hub2"});
+  const auto refused = child("rogue-sim").wait_for(30s);
+  ASSERT_TRUE(refused.has_value()) << "the second hub's bsn sim --node thigh_l kept running";
+  EXPECT_FALSE(exited_cleanly(refused));
+  EXPECT_NE(read_file(log_path("rogue-sim")).find("bsn/raw for node thigh_l"), std::string::npos)
+      << tail(log_path("rogue-sim"));
+  // Authentication handshakes among the hosts: seconds on a loaded machine. Fast DDS 2.9.1 sometimes never completes
+  // the handshake of a pair of participants (about 1 run in 4 here left this test's viewer without fusion's status
+  // for 60 s while fusion fused every node); a participant that is not matched in 20 s is made again.
+  bool joined = false;
+  for (int attempt = 0; attempt < 3 && !joined; ++attempt) {
+    if (attempt > 0) {
+      std::printf("[ retry    ] the test's participants matched nothing in 20 s; making them again\n");
+      ASSERT_TRUE(connect());
+    }
+    joined = wait_until([&] { return snapshot().accepted > 200 && rogue_raw->matched() > 0; }, 20s);
+  }
+  ASSERT_TRUE(joined) << "thigh_l accepted " << snapshot().accepted << ", rogue writer matched "
+                      << rogue_raw->matched();
+
+  bsn::RawSample sample;
+  sample.node_id("thigh_l");
+  sample.acc({0, 0, 9.81});
+  sample.channels(bsn::CHANNEL_ACC | bsn::CHANNEL_GYR);
+  std::uint64_t seq = 0;
+  auto write_rogue = [&](int n) {
+    for (int i = 0; i < n; ++i, ++seq) {
+      sample.seq(seq);
+      sample.timestamp_ns(dds::monotonic_ns());
+      rogue_raw->write(sample);
+      std::this_thread::sleep_for(10ms);
+    }
+  };
+  write_rogue(100);
+  ASSERT_TRUE(wait_until([&] { return snapshot().not_permitted > 0; }, 10s))
+      << "no rogue sample rejected as not_permitted: " << tail(log_path("fusion"));
+
+  const std::string link = "ip -n " + hosts_->ns("sensors") + " link set eth0 ";
+  ASSERT_TRUE(run(link + "down"));
+  ASSERT_TRUE(wait_until([&] { return snapshot().stale; }, 3s)) << "thigh_l not stale after the cut";
+  const Thigh cut = snapshot();
+  write_rogue(200);  // 2 s past the 0.3 s stale timeout
+  std::this_thread::sleep_for(1200ms);
+  const Thigh during = snapshot();
+  ASSERT_TRUE(run(link + "up"));
+  EXPECT_EQ(during.accepted, cut.accepted) << "fusion accepted the rogue's thigh_l samples";
+  EXPECT_EQ(during.handovers, 0u) << "the rogue took thigh_l over";
+  EXPECT_TRUE(during.stale);
+  EXPECT_GE(during.not_permitted - cut.not_permitted, 150u) << "the rogue's samples are not counted as not_permitted";
+  // The real thigh_l returns and is fused again: the rogue locked nobody out.
+  EXPECT_TRUE(wait_until([&] { return snapshot().accepted > during.accepted + 100 && !snapshot().stale; }, 10s))
+      << "thigh_l did not come back from its own sensor";
+  EXPECT_EQ(snapshot().conflicting, 0u);
+  status_reader.reset();
+  rogue_raw.reset();
+  rogue.reset();
+}
+
 }  // namespace
 }  // namespace bsn::integration

@@ -223,7 +223,7 @@ TEST_F(Replay, TruncatedFileAndMissingDatasetGiveClearErrors) {
     w.close();
   }
   spawn("missing", {"replay", missing, "--readers", "0"});
-  EXPECT_EQ(exit_code(child("missing").wait_for(10s)), 1);
+  EXPECT_EQ(exit_code(child("missing").wait_for(10s)), 2);
   const std::string log = read_file(log_path("missing"));
   EXPECT_NE(log.find(missing), std::string::npos) << log;
   EXPECT_NE(log.find("/bsn/raw/imu/seq"), std::string::npos) << log;
@@ -240,7 +240,7 @@ TEST_F(Replay, TruncatedFileAndMissingDatasetGiveClearErrors) {
     std::filesystem::resize_file(cut, std::filesystem::file_size(cut) / 2);
   }
   spawn("cut", {"replay", cut, "--readers", "0"});
-  EXPECT_EQ(exit_code(child("cut").wait_for(10s)), 1);
+  EXPECT_EQ(exit_code(child("cut").wait_for(10s)), 2);
   const std::string cut_log = read_file(log_path("cut"));
   EXPECT_NE(cut_log.find(cut), std::string::npos) << cut_log;
   EXPECT_EQ(cut_log.find("terminate"), std::string::npos) << cut_log;

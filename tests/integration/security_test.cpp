@@ -14,16 +14,21 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cctype>
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <thread>
+#include <vector>
 
+#include "bsn/dds/conversions.hpp"
 #include "bsn/dds/participant.hpp"
 #include "bsn/dds/topics.hpp"
 #include "process_fixture.hpp"
@@ -128,7 +133,8 @@ class Security : public ProcessTest {
   void SetUp() override {
     ProcessTest::SetUp();
     pki_ = dir() / "pki";
-    ASSERT_EQ(make_pki(pki_, "sensor:sensor fusion:fusion viewer:viewer"), 0) << read_file(pki_.string() + ".log");
+    ASSERT_EQ(make_pki(pki_, "sensor:sensor:pelvis,thigh_l fusion:fusion viewer:viewer"), 0)
+        << read_file(pki_.string() + ".log");
   }
   /// Starts fusion and two sensor nodes (pelvis, thigh_l: joint hip_l), secured with their roles if `secured`.
   void start_body(int domain, bool secured) {
@@ -232,14 +238,183 @@ TEST_F(Security, PermissionsLimitEachRoleToItsTopics) {
   EXPECT_NE(read_file(log_path("sim-as-viewer")).find("bsn/raw"), std::string::npos)
       << read_file(log_path("sim-as-viewer"));
 
-  // A sensor identity can write raw samples but not orientations.
+  // A sensor identity can write raw samples of its nodes but not orientations.
   auto sensor = participant_as(domain, pki_ / "sensor");
-  EXPECT_NO_THROW(sensor->make_writer(dds::kRawTopic));
+  EXPECT_NO_THROW(sensor->make_writer(dds::kRawTopic, std::nullopt, "pelvis"));
   EXPECT_THROW(sensor->make_writer(dds::kOrientationTopic), std::runtime_error);
   // And a viewer can read joint angles but not write them.
   auto viewer = participant_as(domain, pki_ / "viewer");
   EXPECT_NO_THROW(viewer->make_reader(dds::kJointAnglesTopic, [](const bsn::JointAngles&, const SampleInfo&) {}));
   EXPECT_THROW(viewer->make_writer(dds::kJointAnglesTopic), std::runtime_error);
+}
+
+/// The counts fusion reports for one node on bsn/status.
+struct NodeCounts {
+  std::uint64_t received = 0, accepted = 0, not_permitted = 0, conflicting = 0, handovers = 0;
+  bool stale = false;
+};
+
+// A sensor identity may write only its own nodes: the middleware refuses it a writer in another node's partition,
+// and fusion refuses, and counts, samples of a node from a writer outside that node's partition, also once the
+// node's own sensor has gone stale (the takeover after a link drop that per-role permissions let through).
+TEST_F(Security, ASensorIdentityWritesOnlyItsOwnNodes) {
+  const int domain = test_domain(82);
+  ASSERT_EQ(make_pki(pki_, "knee:sensor:shank_r"), 0) << read_file(pki_.string() + ".log");
+  // bsn sim with an identity for shank_r refuses to publish thigh_l, naming the topic and the node.
+  spawn("sim-other-node",
+        {"sim", "--node", "thigh_l", "--domain", std::to_string(domain), "--security", (pki_ / "knee").string()});
+  const auto refused = child("sim-other-node").wait_for(20s);
+  ASSERT_TRUE(refused.has_value()) << "bsn sim with another node's identity kept running";
+  EXPECT_FALSE(exited_cleanly(refused));
+  const std::string refusal = read_file(log_path("sim-other-node"));
+  EXPECT_NE(refusal.find("bsn/raw for node thigh_l"), std::string::npos) << refusal;
+
+  auto viewer = participant_as(domain, pki_ / "viewer");
+  std::mutex mutex;
+  NodeCounts thigh;
+  auto status = viewer->make_reader(dds::kStatusTopic, [&](const bsn::Status& st, const SampleInfo&) {
+    std::lock_guard lock(mutex);
+    for (const auto& n : st.nodes()) {
+      if (n.node_id() != "thigh_l") continue;
+      thigh.received = n.received();
+      thigh.accepted = n.accepted();
+      thigh.stale = n.stale();
+      thigh.handovers = n.source_handovers();
+      for (const auto& r : n.rejected()) {
+        if (r.reason() == "not_permitted") thigh.not_permitted = r.count();
+        if (r.reason() == "conflicting_source") thigh.conflicting = r.count();
+      }
+    }
+  });
+  auto counts = [&] {
+    std::lock_guard lock(mutex);
+    return thigh;
+  };
+  start_body(domain, true);
+  ASSERT_TRUE(wait_until([&] { return counts().accepted > 100; }, 45s)) << "thigh_l accepted " << counts().accepted;
+
+  // The other identity writes thigh_l samples in its own node's partition (its permissions allow that writer).
+  auto rogue = participant_as(domain, pki_ / "knee");
+  auto rogue_raw = rogue->make_writer(dds::kRawTopic, std::nullopt, "shank_r");
+  bsn::RawSample sample;
+  sample.node_id("thigh_l");
+  sample.acc({0, 0, 9.81});
+  sample.channels(bsn::CHANNEL_ACC | bsn::CHANNEL_GYR);
+  std::uint64_t seq = 0;
+  auto write_rogue = [&](int n) {
+    for (int i = 0; i < n; ++i, ++seq) {
+      sample.seq(seq);
+      sample.timestamp_ns(dds::monotonic_ns());
+      rogue_raw->write(sample);
+      std::this_thread::sleep_for(10ms);
+    }
+  };
+  ASSERT_TRUE(wait_until([&] { return rogue_raw->matched() > 0; }, 30s)) << "the rogue's writer matched no reader";
+  write_rogue(100);
+  ASSERT_TRUE(wait_until([&] { return counts().not_permitted > 0; }, 10s)) << "no sample rejected as not_permitted";
+
+  // The real thigh_l goes silent (its link drops); the rogue keeps writing past the stale timeout.
+  stop("thigh_l");
+  ASSERT_TRUE(wait_until([&] { return counts().stale; }, 5s)) << "thigh_l not reported stale";
+  const NodeCounts before = counts();
+  write_rogue(150);                     // 1.5 s, five stale timeouts
+  std::this_thread::sleep_for(1200ms);  // two status periods
+  const NodeCounts after = counts();
+  EXPECT_EQ(after.accepted, before.accepted) << "fusion accepted the rogue's thigh_l samples";
+  EXPECT_EQ(after.handovers, 0u) << "the rogue took thigh_l over";
+  EXPECT_TRUE(after.stale);
+  EXPECT_GE(after.not_permitted - before.not_permitted, 100u) << "the rogue's samples are not counted as not_permitted";
+  EXPECT_NE(read_file(log_path("fusion")).find("rejected as not_permitted"), std::string::npos)
+      << tail(log_path("fusion"));
+}
+
+// Discovery's participant announcements (SPDP) are not encrypted even with DDS-Security: a secured participant's
+// name says nothing about the process or its node (open, `bsn sim thigh_l`).
+TEST_F(Security, SecuredParticipantNamesNameNoProcessOrNode) {
+  const int domain = test_domain(83);
+  LoopbackCapture capture(domain);
+  if (!capture.available()) GTEST_SKIP() << "a packet socket needs CAP_NET_RAW (run as root): " << strerror(errno);
+  auto viewer = participant_as(domain, pki_ / "viewer");
+  JointCounter joints(*viewer);
+  start_body(domain, true);
+  ASSERT_TRUE(wait_until([&] { return joints.samples > 200; }, 45s)) << joints.samples << " joint-angle samples";
+  EXPECT_FALSE(capture.saw("bsn sim")) << "a participant name tells a sensor process and its node";
+  EXPECT_FALSE(capture.saw("bsn fusion")) << "a participant name tells the fusion process";
+  EXPECT_FALSE(capture.saw("security test")) << "this test's own participant name travels";
+}
+
+// Fast DDS's own log lines (here: access control refusing a reader the identity may not have) go to stderr with
+// bsn's log, not into the stdout of `bsn echo --format csv`, which scripts parse (Fast DDS's default: stdout).
+TEST_F(Security, MiddlewareErrorsStayOutOfEchoOutput) {
+  const std::string out = (dir() / "echo.csv").string(), err = (dir() / "echo.err").string();
+  spawn_command("echo", {"/bin/sh", "-c",
+                         "exec '" + bsn_executable() + "' echo bsn/raw --format csv --count 5 --timeout 10 --domain " +
+                             std::to_string(test_domain(84)) + " --security '" + (pki_ / "viewer").string() + "' > '" +
+                             out + "' 2> '" + err + "'"});
+  const auto status = child("echo").wait_for(30s);
+  ASSERT_TRUE(status.has_value()) << "bsn echo kept running";
+  EXPECT_FALSE(exited_cleanly(status)) << "a viewer identity read bsn/raw";
+  const std::string csv = read_file(out), log = read_file(err);
+  EXPECT_EQ(csv, "") << "bsn echo's data stream holds:\n" << csv.substr(0, 1000);
+  EXPECT_NE(log.find("error: Fast DDS [SECURITY] bsn/raw topic not found in allow rule"), std::string::npos)
+      << "the middleware's refusal is not in stderr:\n"
+      << log;
+  EXPECT_EQ(log.find('\x1b'), std::string::npos) << "terminal escapes in the log";
+}
+
+// Seven secured sensor nodes and fusion start at once on a loaded machine (two busy processes): every node joins.
+// Fast DDS 2.9.1 sometimes never completes the handshake of a pair of participants (3 of 13 secured starts once left
+// a node at 0 received for 150 s, silently); a secured node that no reader matched in 10 s says so and makes a new
+// participant. The test's own viewer does the same for itself after 20 s.
+TEST_F(Security, SecuredNodesAllJoinUnderLoad) {
+  const int domain = test_domain(86);
+  const std::vector<std::string> nodes{"pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r"};
+  ASSERT_EQ(make_pki(pki_, "hub:sensor:pelvis,thigh_l,shank_l,foot_l,thigh_r,shank_r,foot_r"), 0)
+      << read_file(pki_.string() + ".log");
+  for (int i = 0; i < 2; ++i) spawn_command("load-" + std::to_string(i), {"/bin/sh", "-c", "while :; do :; done"});
+  std::mutex mutex;
+  std::map<std::string, std::uint64_t> accepted;
+  std::unique_ptr<dds::Participant> viewer;
+  std::unique_ptr<dds::Reader<bsn::Status>> status;
+  auto connect = [&] {
+    status.reset();
+    viewer = participant_as(domain, pki_ / "viewer");
+    status = viewer->make_reader(dds::kStatusTopic, [&](const bsn::Status& st, const SampleInfo&) {
+      std::lock_guard lock(mutex);
+      for (const auto& n : st.nodes()) accepted[n.node_id()] = n.accepted();
+    });
+  };
+  auto joined = [&] {
+    std::lock_guard lock(mutex);
+    return std::count_if(nodes.begin(), nodes.end(), [&](const std::string& n) { return accepted[n] > 0; });
+  };
+  connect();
+  const std::string d = std::to_string(domain);
+  // A node that no reader matches says so loudly after 10 s and starts over on a new participant, which then joins.
+  spawn("pelvis", {"sim", "--node", "pelvis", "--domain", d, "--security", (pki_ / "hub").string()});
+  EXPECT_TRUE(wait_until(
+      [&] {
+        return read_file(log_path("pelvis")).find("error: node 'pelvis': no reader of bsn/raw matched in 10 s") !=
+               std::string::npos;
+      },
+      20s))
+      << tail(log_path("pelvis"));
+  spawn("fusion", {"fusion", "--status-period", "0.5", "--domain", d, "--security", (pki_ / "fusion").string()});
+  for (const std::string& node : nodes)
+    if (node != "pelvis") spawn(node, {"sim", "--node", node, "--domain", d, "--security", (pki_ / "hub").string()});
+  const auto start = Clock::now();
+  bool all = false;
+  for (int attempt = 0; attempt < 3 && !all; ++attempt) {
+    if (attempt > 0 && status->matched() == 0) connect();  // the viewer's own handshake, not the nodes'
+    all = wait_until([&] { return joined() == static_cast<long>(nodes.size()); }, 20s);
+  }
+  int rejoins = 0;  // besides pelvis's
+  for (const std::string& node : nodes)
+    if (node != "pelvis" && read_file(log_path(node)).find("Making a new participant") != std::string::npos) ++rejoins;
+  std::printf("[ measure  ] %ld of %zu nodes joined in %.1f s; %d made a new participant\n", joined(), nodes.size(),
+              std::chrono::duration<double>(Clock::now() - start).count(), rejoins);
+  EXPECT_TRUE(all) << joined() << " of " << nodes.size() << " secured nodes joined within 60 s";
+  status.reset();
 }
 
 // The capture sees the joint's name and the topic's name in the open (so it would catch a leak) ...

@@ -1,13 +1,21 @@
 #include "bsn/dds/participant.hpp"
 
 #include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fnmatch.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstdlib>
+#include <cstring>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/log/Log.hpp>
+#include <fastdds/dds/topic/ContentFilteredTopic.hpp>
+#include <fastdds/dds/topic/IContentFilter.hpp>
+#include <fastdds/dds/topic/IContentFilterFactory.hpp>
 #include <filesystem>
 #include <mutex>
+#include <sstream>
 #include <stdexcept>
 
 #include "bsn/logging/log.hpp"
@@ -88,6 +96,34 @@ class ReaderEvents final : public DataReaderListener {
   std::shared_ptr<EndpointEvents> events_;
 };
 
+// Fast DDS's own log lines (security handshake errors, XML parser errors, ...). Its default consumer prints them
+// on stdout, which is the data stream of `bsn echo --format csv|json` and `bsn eval --json`: they go through bsn's
+// log instead (stderr, with the process's role), escaped like every text from the network.
+class MiddlewareLog final : public LogConsumer {
+ public:
+  void Consume(const Log::Entry& entry) override {
+    const logging::LogLevel level = entry.kind == Log::Kind::Error     ? logging::LogLevel::kError
+                                    : entry.kind == Log::Kind::Warning ? logging::LogLevel::kWarn
+                                                                       : logging::LogLevel::kDebug;
+    const char* category = entry.context.category != nullptr ? entry.context.category : "";
+    std::string_view message = entry.message;
+    while (!message.empty() && (message.back() == '\n' || message.back() == ' ')) message.remove_suffix(1);
+    logging::log_line(
+        level, "Fast DDS [" + logging::printable(category, 64) + "] " + logging::printable(message, kMaxMessageChars));
+  }
+
+ private:
+  static constexpr std::size_t kMaxMessageChars = 1000;
+};
+
+void route_middleware_log() {
+  static std::once_flag routed;
+  std::call_once(routed, [] {
+    Log::ClearConsumers();
+    Log::RegisterConsumer(std::make_unique<MiddlewareLog>());
+  });
+}
+
 // DDS-Security from an identity folder of deploy/security/make-pki.sh: PKI-DH authentication, access control
 // by the signed governance and permissions, AES-GCM-GMAC encryption.
 void add_security(DomainParticipantQos& qos, const std::string& dir) {
@@ -114,6 +150,7 @@ void add_security(DomainParticipantQos& qos, const std::string& dir) {
 }
 
 DomainParticipantQos participant_qos(const std::string& name) {
+  route_middleware_log();
   // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies; the
   // factory reads the profiles lazily, so load them before asking for the default.
   // load_profiles() ignores a file that does not parse; loading it explicitly first reports that (and the
@@ -130,6 +167,9 @@ DomainParticipantQos participant_qos(const std::string& name) {
   const char* security = std::getenv("BSN_SECURITY_DIR");
   if (security && *security) {
     add_security(qos, security);
+    // The participant's name travels in plaintext in discovery (SPDP is not encrypted, even with DDS-Security):
+    // no node id or role in it.
+    qos.name("bsn");
   } else {
     static std::once_flag said_open;
     std::call_once(said_open, [] {
@@ -160,7 +200,94 @@ std::string refused_by_permissions() {
          " may not allow it (its role's topics: README, deployment)";
 }
 
+bool is_secured() {
+  const char* security = std::getenv("BSN_SECURITY_DIR");
+  return security && *security;
+}
+
+// Topics whose writers carry one node's samples: under DDS-Security each goes in its node's partition.
+bool is_per_node(const std::string& topic) { return topic == kRawTopic.name; }
+
 }  // namespace
+
+// Remembers the partitions each discovered bsn/raw writer had when it was first discovered (before Fast DDS pairs
+// it with a reader: PDP::addWriterProxyData calls the listener first).
+struct Participant::Discovery final : DomainParticipantListener {
+  mutable std::mutex mutex;
+  std::map<eprosima::fastrtps::rtps::GUID_t, std::vector<std::string>> partitions;
+  void on_publisher_discovery(DomainParticipant*, eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override {
+    using Info = eprosima::fastrtps::rtps::WriterDiscoveryInfo;
+    if (!is_per_node(info.info.topicName().to_string())) return;
+    std::lock_guard lock(mutex);
+    if (info.status == Info::DISCOVERED_WRITER)
+      partitions.try_emplace(info.info.guid(), info.info.m_qos.m_partition.getNames());
+    else if (info.status == Info::REMOVED_WRITER)
+      partitions.erase(info.info.guid());
+  }
+};
+
+bool Participant::writer_may_write_node(const eprosima::fastrtps::rtps::GUID_t& writer, const std::string& node) const {
+  if (!discovery_) return true;
+  std::lock_guard lock(discovery_->mutex);
+  const auto it = discovery_->partitions.find(writer);
+  if (it == discovery_->partitions.end()) return false;
+  // A partition is a pattern in DDS; access control allowed this writer's only if its permissions match it.
+  for (const std::string& partition : it->second)
+    if (fnmatch(partition.c_str(), node.c_str(), 0) == 0) return true;
+  return false;
+}
+
+// The content filters of a participant's admitting readers: one filter class per participant, named after its GUID
+// so no other participant has a factory of that name and no writer filters for these readers on its side (a
+// writer applies a reader's filter only when it has the reader's filter class itself). The filter expression is
+// the admission's index.
+struct Participant::AdmissionFilters final : IContentFilterFactory {
+  struct Filter final : IContentFilter {
+    PayloadAdmission admit;
+    bool evaluate(const SerializedPayload& payload, const FilterSampleInfo&, const GUID_t&) const override {
+      return admit(payload);
+    }
+  };
+  std::string class_name;
+  std::mutex mutex;
+  std::vector<std::unique_ptr<Filter>> filters;
+
+  ReturnCode_t create_content_filter(const char*, const char*, const TopicDataType*, const char* expression,
+                                     const ParameterSeq&, IContentFilter*& instance) override {
+    std::lock_guard lock(mutex);
+    char* end = nullptr;
+    const unsigned long index = std::strtoul(expression, &end, 10);
+    if (end == expression || *end != '\0' || index >= filters.size()) return ReturnCode_t::RETCODE_BAD_PARAMETER;
+    instance = filters[index].get();
+    return ReturnCode_t::RETCODE_OK;
+  }
+  ReturnCode_t delete_content_filter(const char*, IContentFilter*) override { return ReturnCode_t::RETCODE_OK; }
+};
+
+TopicDescription* Participant::admitting_topic(eprosima::fastdds::dds::Topic* topic, PayloadAdmission admit) {
+  std::lock_guard lock(mutex_);
+  if (!admission_) {
+    admission_ = std::make_unique<AdmissionFilters>();
+    std::ostringstream name;
+    name << "bsn_admission_" << participant_->guid().guidPrefix;
+    admission_->class_name = name.str();
+    if (participant_->register_content_filter_factory(admission_->class_name.c_str(), admission_.get()) !=
+        ReturnCode_t::RETCODE_OK)
+      throw std::runtime_error("cannot register the admission filter of topic " + topic->get_name());
+  }
+  std::size_t index = 0;
+  {
+    std::lock_guard filters_lock(admission_->mutex);
+    index = admission_->filters.size();
+    admission_->filters.push_back(std::make_unique<AdmissionFilters::Filter>());
+    admission_->filters.back()->admit = std::move(admit);
+  }
+  ContentFilteredTopic* filtered =
+      participant_->create_contentfilteredtopic(topic->get_name() + "#admission" + std::to_string(index), topic,
+                                                std::to_string(index), {}, admission_->class_name.c_str());
+  if (!filtered) throw std::runtime_error("cannot create the admission filter of topic " + topic->get_name());
+  return filtered;
+}
 
 void count_undecodable(EndpointEvents& events) {
   if (!events.undecodable_counter) return;
@@ -199,8 +326,10 @@ Participant::Participant(const Options& options) {
   if (options.domain < 0 || options.domain > 232) {
     throw std::runtime_error("DDS domain id " + std::to_string(options.domain) + " is outside 0..232");
   }
-  participant_ = DomainParticipantFactory::get_instance()->create_participant(static_cast<DomainId_t>(options.domain),
-                                                                              participant_qos(options.name));
+  secured_ = is_secured();
+  if (secured_) discovery_ = std::make_unique<Discovery>();
+  participant_ = DomainParticipantFactory::get_instance()->create_participant(
+      static_cast<DomainId_t>(options.domain), participant_qos(options.name), discovery_.get(), StatusMask::none());
   if (!participant_)
     throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options.domain));
   // The participant's defaults, not PUBLISHER_QOS_DEFAULT: an XML default profile applies to them.
@@ -227,36 +356,70 @@ eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(const std::stri
   return t;
 }
 
+Publisher* Participant::publisher_in(const std::string& partition) {
+  if (auto it = partition_publishers_.find(partition); it != partition_publishers_.end()) return it->second;
+  PublisherQos qos = participant_->get_default_publisher_qos();
+  qos.partition().push_back(partition.c_str());
+  Publisher* p = participant_->create_publisher(qos);
+  if (!p) throw std::runtime_error("cannot create a DDS publisher in partition " + partition);
+  partition_publishers_[partition] = p;
+  return p;
+}
+
 // Writers and readers start from their publisher's or subscriber's default QoS (the XML default profile, if
 // any) with bsn's delivery of the topic on top; a profile named after the topic replaces both.
 DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
-                                       std::shared_ptr<EndpointEvents> events) {
-  DataWriterQos qos = publisher_->get_default_datawriter_qos();
-  if (publisher_->get_datawriter_qos_from_profile(topic->get_name(), qos) != ReturnCode_t::RETCODE_OK)
-    qos = writer_qos(delivery, publisher_->get_default_datawriter_qos());
+                                       std::shared_ptr<EndpointEvents> events, const std::string& node) {
+  Publisher* publisher = publisher_;
+  if (secured_ && is_per_node(topic->get_name())) {
+    if (node.empty()) throw std::runtime_error("a secured writer on " + topic->get_name() + " needs its node id");
+    std::lock_guard lock(mutex_);
+    publisher = publisher_in(node);
+  }
+  DataWriterQos qos = publisher->get_default_datawriter_qos();
+  if (publisher->get_datawriter_qos_from_profile(topic->get_name(), qos) != ReturnCode_t::RETCODE_OK)
+    qos = writer_qos(delivery, publisher->get_default_datawriter_qos());
   events->topic = topic->get_name();
   events->mismatch_counter = &qos_mismatches_;
   auto listener = std::make_unique<WriterEvents>(events);
-  DataWriter* w = publisher_->create_datawriter(topic, qos, listener.get(), StatusMask::all());
-  if (!w) throw std::runtime_error("cannot create a DDS writer on " + topic->get_name() + refused_by_permissions());
+  DataWriter* w = publisher->create_datawriter(topic, qos, listener.get(), StatusMask::all());
+  if (!w) {
+    throw std::runtime_error("cannot create a DDS writer on " + topic->get_name() +
+                             (publisher != publisher_ ? " for node " + node : "") + refused_by_permissions());
+  }
   std::lock_guard lock(mutex_);
   writer_listeners_.push_back(std::move(listener));
   return w;
 }
 
-void Participant::create_reader(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
+void Participant::create_reader(eprosima::fastdds::dds::TopicDescription* topic, TopicQos delivery,
                                 std::shared_ptr<EndpointEvents> events) {
-  DataReaderQos qos = subscriber_->get_default_datareader_qos();
-  if (subscriber_->get_datareader_qos_from_profile(topic->get_name(), qos) != ReturnCode_t::RETCODE_OK)
-    qos = reader_qos(delivery, subscriber_->get_default_datareader_qos());
-  events->topic = topic->get_name();
+  // A filtered topic's delivery and profile are its source topic's.
+  const auto* filtered = dynamic_cast<ContentFilteredTopic*>(topic);
+  const std::string name = filtered != nullptr ? filtered->get_related_topic()->get_name() : topic->get_name();
+  Subscriber* subscriber = subscriber_;
+  if (secured_ && is_per_node(name)) {
+    // Secured writers of bsn/raw are each in their node's partition: read them all ("*" also matches the default).
+    std::lock_guard lock(mutex_);
+    if (!any_partition_subscriber_) {
+      SubscriberQos sq = participant_->get_default_subscriber_qos();
+      sq.partition().push_back("*");
+      any_partition_subscriber_ = participant_->create_subscriber(sq);
+      if (!any_partition_subscriber_) throw std::runtime_error("cannot create a DDS subscriber of every partition");
+    }
+    subscriber = any_partition_subscriber_;
+  }
+  DataReaderQos qos = subscriber->get_default_datareader_qos();
+  if (subscriber->get_datareader_qos_from_profile(name, qos) != ReturnCode_t::RETCODE_OK)
+    qos = reader_qos(delivery, subscriber->get_default_datareader_qos());
+  events->topic = name;
   events->mismatch_counter = &qos_mismatches_;
   events->undecodable_counter = &undecodable_samples_;
   events->lost_counter = &lost_samples_;
   events->rejected_counter = &rejected_samples_;
   auto listener = std::make_unique<ReaderEvents>(events);
-  DataReader* r = subscriber_->create_datareader(topic, qos, listener.get(), StatusMask::all());
-  if (!r) throw std::runtime_error("cannot create a DDS reader on " + topic->get_name() + refused_by_permissions());
+  DataReader* r = subscriber->create_datareader(topic, qos, listener.get(), StatusMask::all());
+  if (!r) throw std::runtime_error("cannot create a DDS reader on " + name + refused_by_permissions());
   std::lock_guard lock(mutex_);
   reader_listeners_.push_back(std::move(listener));
   readers_.push_back(r);

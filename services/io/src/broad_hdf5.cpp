@@ -89,6 +89,8 @@ Recording read_broad_hdf5(const std::string& path) {
     throw IoError(path + ": cannot read attribute 'sampling_rate'");
   }
   rec.validate(path);
+  // As for CSV: a recording of fewer than two samples has no time step to score or replay (an empty or cut file).
+  if (rec.gyr.rows() < 2) throw IoError(path + ": fewer than two samples");
   return rec;
 }
 

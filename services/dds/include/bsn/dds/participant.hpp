@@ -105,20 +105,33 @@ class Participant {
 
   /// A writer on `topic`, delivered as the topic says or as `delivery`. A data_writer profile named after the
   /// topic in the XML profiles file replaces bsn's delivery settings for it.
+  /// `node`: the node whose samples a bsn/raw writer carries. Under DDS-Security the writer goes in the DDS
+  /// partition of that name, which the identity's permissions must allow (make-pki.sh NAME:sensor:NODES), and fusion
+  /// takes a node's samples only from writers in its partition. Ignored on an open network and for other topics.
   template <class PubSub>
   std::unique_ptr<Writer<typename PubSub::type>> make_writer(const Topic<PubSub>& topic,
-                                                             std::optional<TopicQos> delivery = {}) {
+                                                             std::optional<TopicQos> delivery = {},
+                                                             const std::string& node = "") {
     auto events = std::make_shared<EndpointEvents>();
-    auto* w = create_writer(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events);
+    auto* w = create_writer(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events, node);
     return std::make_unique<Writer<typename PubSub::type>>(w, events);
   }
 
-  /// A reader on `topic` (delivery and XML profile as for writers) that calls `on_sample` for every valid sample.
+  /// Decides whether a sample may enter a reader. Fast DDS asks it on its receive thread for every sample before
+  /// the sample enters the reader's history (a content filter of this participant's own class), so a refused
+  /// sample takes none of the reader's instances (max_instances, 4096 by default) and never reaches on_sample;
+  /// the decider counts what it refuses. Samples whose bytes do not decode are let through to be counted as
+  /// undecodable.
+  template <class T>
+  using Admission = std::function<bool(const T&)>;
+
+  /// A reader on `topic` (delivery and XML profile as for writers) that calls `on_sample` for every valid sample
+  /// that `admit` (if given) lets in.
   template <class PubSub>
   std::unique_ptr<Reader<typename PubSub::type>> make_reader(
       const Topic<PubSub>& topic,
       std::function<void(const typename PubSub::type&, const eprosima::fastdds::dds::SampleInfo&)> on_sample,
-      std::optional<TopicQos> delivery = {}) {
+      std::optional<TopicQos> delivery = {}, Admission<typename PubSub::type> admit = {}) {
     auto events = std::make_shared<EndpointEvents>();
     events->on_data = [cb = std::move(on_sample),
                        events_ptr = events.get()](eprosima::fastdds::dds::DataReader* reader) {
@@ -134,7 +147,18 @@ class Participant {
         cb(sample, info);
       }
     };
-    create_reader(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events);
+    eprosima::fastdds::dds::TopicDescription* source = dds_topic<PubSub>(topic.name);
+    if (admit) {
+      source = admitting_topic(static_cast<eprosima::fastdds::dds::Topic*>(source),
+                               [admit = std::move(admit)](const eprosima::fastrtps::rtps::SerializedPayload_t& bytes) {
+                                 thread_local typename PubSub::type sample;
+                                 thread_local Guarded<PubSub> type;
+                                 auto* payload = const_cast<eprosima::fastrtps::rtps::SerializedPayload_t*>(&bytes);
+                                 if (!type.deserialize(payload, &sample) || last_deserialize_failed()) return true;
+                                 return admit(sample);
+                               });
+    }
+    create_reader(source, delivery.value_or(topic.qos), events);
     return std::make_unique<Reader<typename PubSub::type>>(events);
   }
 
@@ -151,6 +175,13 @@ class Participant {
 
   eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
 
+  /// True if the participant runs with DDS-Security (BSN_SECURITY_DIR).
+  bool secured() const { return secured_; }
+  /// Under DDS-Security: true if the bsn/raw writer `writer` was discovered in a DDS partition that names `node`
+  /// (access control let it match only if its identity may write that partition). Partitions are taken as first
+  /// discovered: a later change of a matched writer's partitions is not checked again by Fast DDS 2.9.1.
+  bool writer_may_write_node(const eprosima::fastrtps::rtps::GUID_t& writer, const std::string& node) const;
+
  private:
   template <class PubSub>
   eprosima::fastdds::dds::Topic* dds_topic(const std::string& name) {
@@ -160,9 +191,15 @@ class Participant {
 
   eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& name,
                                                       eprosima::fastdds::dds::TypeSupport type);
+  using PayloadAdmission = std::function<bool(const eprosima::fastrtps::rtps::SerializedPayload_t&)>;
+  /// A content-filtered view of `topic` whose filter is `admit` (AdmissionFilters in participant.cpp).
+  eprosima::fastdds::dds::TopicDescription* admitting_topic(eprosima::fastdds::dds::Topic* topic,
+                                                            PayloadAdmission admit);
   eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
-                                                    std::shared_ptr<EndpointEvents> events);
-  void create_reader(eprosima::fastdds::dds::Topic* topic, TopicQos delivery, std::shared_ptr<EndpointEvents> events);
+                                                    std::shared_ptr<EndpointEvents> events, const std::string& node);
+  eprosima::fastdds::dds::Publisher* publisher_in(const std::string& partition);  ///< under mutex_
+  void create_reader(eprosima::fastdds::dds::TopicDescription* topic, TopicQos delivery,
+                     std::shared_ptr<EndpointEvents> events);
 
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
@@ -172,6 +209,13 @@ class Participant {
   std::vector<std::unique_ptr<eprosima::fastdds::dds::DataWriterListener>> writer_listeners_;
   std::vector<std::unique_ptr<eprosima::fastdds::dds::DataReaderListener>> reader_listeners_;
   std::vector<eprosima::fastdds::dds::DataReader*> readers_;
+  bool secured_ = false;
+  std::map<std::string, eprosima::fastdds::dds::Publisher*> partition_publishers_;
+  eprosima::fastdds::dds::Subscriber* any_partition_subscriber_ = nullptr;  ///< secured bsn/raw readers
+  struct Discovery;
+  std::unique_ptr<Discovery> discovery_;  ///< the partitions of discovered bsn/raw writers (secured only)
+  struct AdmissionFilters;
+  std::unique_ptr<AdmissionFilters> admission_;  ///< the filter class of this participant's admitting readers
   std::atomic<std::uint64_t> qos_mismatches_{0};
   std::atomic<std::uint64_t> undecodable_samples_{0};
   std::atomic<std::uint64_t> lost_samples_{0};
