@@ -2,12 +2,17 @@
 
 #include <fastdds/rtps/common/SerializedPayload.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <stdexcept>
 
@@ -16,6 +21,8 @@
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/topics.hpp"
 #include "bsn/eval/evaluation.hpp"
+#include "bsn/fusion/orientation_error.hpp"
+#include "bsn/io/json.hpp"
 #include "bsn/io/recording.hpp"
 #include "bsn/io/session_file.hpp"
 #include "fusion_pipeline.hpp"
@@ -294,6 +301,34 @@ struct Event {
   static constexpr std::uint32_t kCalibration = 0xffffffffu;
 };
 
+/// The merged order of every sample (and, with `calibrations`, every calibration result) of the input.
+std::vector<Event> merge_events(const ProcessInput& in, const std::string& order, bool calibrations) {
+  std::vector<Event> events;
+  std::size_t total = 0;
+  for (const NodeTrack& t : in.tracks) total += t.size();
+  events.reserve(total + in.calibrations.size());
+  const bool by_arrival = order == "arrival";
+  for (std::uint32_t k = 0; k < in.tracks.size(); ++k) {
+    const NodeTrack& t = in.tracks[k];
+    const auto rank = static_cast<std::uint32_t>(t.segment);
+    for (std::size_t i = 0; i < t.size(); ++i) {
+      events.push_back(by_arrival ? Event{t.arrival_ns[i], t.timestamp_ns[i], rank, k, i}
+                                  : Event{t.timestamp_ns[i], 0, rank, k, i});
+    }
+  }
+  if (calibrations) {
+    if (!by_arrival) throw UsageError("--calibrations as-recorded needs --order arrival (a session's arrival times)");
+    for (std::size_t i = 0; i < in.calibrations.size(); ++i)
+      events.push_back({in.calibrations[i].arrival_ns, 0, 0, Event::kCalibration, i});
+  }
+  std::stable_sort(events.begin(), events.end(), [](const Event& a, const Event& b) {
+    if (a.key != b.key) return a.key < b.key;
+    if (a.tie != b.tie) return a.tie < b.tie;
+    return a.rank < b.rank;
+  });
+  return events;
+}
+
 std::string describe_filters(const fusion::BodyModel& body) {
   std::string filters;
   for (const auto& s : body.segments) {
@@ -304,9 +339,8 @@ std::string describe_filters(const fusion::BodyModel& body) {
   return filters;
 }
 
-int process(const ProcessOptions& opt) {
-  if (opt.calibrations != "first-sample" && opt.calibrations != "as-recorded")
-    throw UsageError("--calibrations must be first-sample or as-recorded, not '" + opt.calibrations + "'");
+/// Reads the input and the body (nodes mapped to segments, --filter applied); checks the input and the options.
+ProcessInput load_input(const ProcessOptions& opt, fusion::BodyModel& body, std::vector<std::string>& notes) {
   if (!opt.order.empty() && opt.order != "arrival" && opt.order != "time")
     throw UsageError("--order must be arrival or time, not '" + opt.order + "'");
   if (!fs::exists(opt.input)) throw UsageError(opt.input + ": no such file or folder");
@@ -315,11 +349,7 @@ int process(const ProcessOptions& opt) {
     throw UsageError(opt.input + ": not a bsn session file (bsn record) nor a folder of per-node recordings");
   if (fs::exists(opt.out) && fs::equivalent(opt.out, opt.input)) throw UsageError("--out must not be the input");
 
-  using Clock = std::chrono::steady_clock;
-  const auto t_start = Clock::now();
   ProcessInput in;
-  std::vector<std::string> notes;
-  fusion::BodyModel body;
   if (folder) {
     body = load_body(opt, nullptr);
     read_folder(opt.input, in, body, notes);
@@ -351,6 +381,26 @@ int process(const ProcessOptions& opt) {
     }
     for (auto& s : body.segments) s.filter = spec;
   }
+  return in;
+}
+
+void fill_raw(const NodeTrack& t, std::size_t i, bsn::RawSample& raw) {
+  raw.timestamp_ns(t.timestamp_ns[i]);
+  raw.seq(t.seq[i]);
+  raw.acc({t.acc[3 * i], t.acc[3 * i + 1], t.acc[3 * i + 2]});
+  raw.gyr({t.gyr[3 * i], t.gyr[3 * i + 1], t.gyr[3 * i + 2]});
+  raw.mag({t.mag[3 * i], t.mag[3 * i + 1], t.mag[3 * i + 2]});
+  raw.channels(t.channels[i]);
+}
+
+int process(const ProcessOptions& opt) {
+  if (opt.calibrations != "first-sample" && opt.calibrations != "as-recorded")
+    throw UsageError("--calibrations must be first-sample or as-recorded, not '" + opt.calibrations + "'");
+  using Clock = std::chrono::steady_clock;
+  const auto t_start = Clock::now();
+  std::vector<std::string> notes;
+  fusion::BodyModel body;
+  ProcessInput in = load_input(opt, body, notes);
   fusion::BodyFusion::Calibrations calibrations =
       opt.body_path.empty() ? fusion::BodyFusion::Calibrations{} : config::load_body_calibrations(opt.body_path);
   // Calibration files from the command line: after the body's and the session's, so they win.
@@ -364,7 +414,7 @@ int process(const ProcessOptions& opt) {
                        "' is on no segment of the body");
     documents.push_back(std::move(d));
   }
-  const std::string order = !opt.order.empty() ? opt.order : folder ? "time" : "arrival";
+  const std::string order = !opt.order.empty() ? opt.order : in.session ? "arrival" : "time";
 
   FusionPipeline pipeline(body, calibrations, {}, 0);
   std::size_t applied_at_start = 0;
@@ -382,31 +432,9 @@ int process(const ProcessOptions& opt) {
     ++applied_at_start;
   }
 
-  // The merged order of every sample (and calibration) of the input.
-  std::vector<Event> events;
   std::size_t total = 0;
   for (const NodeTrack& t : in.tracks) total += t.size();
-  events.reserve(total + in.calibrations.size());
-  const bool by_arrival = order == "arrival";
-  for (std::uint32_t k = 0; k < in.tracks.size(); ++k) {
-    const NodeTrack& t = in.tracks[k];
-    const auto rank = static_cast<std::uint32_t>(t.segment);
-    for (std::size_t i = 0; i < t.size(); ++i) {
-      events.push_back(by_arrival ? Event{t.arrival_ns[i], t.timestamp_ns[i], rank, k, i}
-                                  : Event{t.timestamp_ns[i], 0, rank, k, i});
-    }
-  }
-  if (opt.calibrations == "as-recorded") {
-    if (!by_arrival) throw UsageError("--calibrations as-recorded needs --order arrival (a session's arrival times)");
-    for (std::size_t i = 0; i < in.calibrations.size(); ++i)
-      events.push_back({in.calibrations[i].arrival_ns, 0, 0, Event::kCalibration, i});
-  }
-  std::stable_sort(events.begin(), events.end(), [](const Event& a, const Event& b) {
-    if (a.key != b.key) return a.key < b.key;
-    if (a.tie != b.tie) return a.tie < b.tie;
-    return a.rank < b.rank;
-  });
-
+  const std::vector<Event> events = merge_events(in, order, opt.calibrations == "as-recorded");
   std::map<std::string, std::string> attributes{
       {"bsn_version", BSN_VERSION},
       {"processed_by", "bsn process"},
@@ -448,12 +476,7 @@ int process(const ProcessOptions& opt) {
     const NodeTrack& t = in.tracks[ev.track];
     const std::size_t i = ev.index;
     bsn::RawSample& raw = raws[ev.track];
-    raw.timestamp_ns(t.timestamp_ns[i]);
-    raw.seq(t.seq[i]);
-    raw.acc({t.acc[3 * i], t.acc[3 * i + 1], t.acc[3 * i + 2]});
-    raw.gyr({t.gyr[3 * i], t.gyr[3 * i + 1], t.gyr[3 * i + 2]});
-    raw.mag({t.mag[3 * i], t.mag[3 * i + 1], t.mag[3 * i + 2]});
-    raw.channels(t.channels[i]);
+    fill_raw(t, i, raw);
     if (e == 0) first_ns = t.arrival_ns[i];
     last_ns = std::max(last_ns, t.arrival_ns[i]);
     const fusion::SampleResult& r = pipeline.process(raw, t.timestamp_ns[i]);
@@ -540,6 +563,266 @@ Command process_command() {
             cmd->add_flag("--quiet", opt->quiet, "no progress bar");
             return [opt] { return run_process(*opt); };
           }};
+}
+
+}  // namespace bsn::services
+
+// ---- bsn eval --body ---------------------------------------------------------------------------------------------
+
+namespace bsn::services {
+namespace {
+
+/// The reference of one segment: sensor-to-earth by timestamp.
+using TruthTrack = std::map<std::uint64_t, fusion::Quat>;
+
+struct JointSeries {
+  std::string name;
+  std::size_t parent = 0, child = 0;
+  fusion::JointConvention convention;
+  bool aligned = false;
+  std::vector<double> t_s;
+  std::vector<fusion::Quat> est, truth;  ///< relative orientations in the published frames
+};
+
+/// The mean rotation of unit quaternions (the dominant eigenvector of sum q q^T, Markley et al. 2007).
+fusion::Quat mean_rotation(const std::vector<fusion::Quat>& qs) {
+  Eigen::Matrix4d m = Eigen::Matrix4d::Zero();
+  for (const fusion::Quat& q : qs) {
+    const Eigen::Vector4d v(q.w(), q.x(), q.y(), q.z());
+    m += v * v.transpose();
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> eig(m);
+  const Eigen::Vector4d v = eig.eigenvectors().col(3);
+  return fusion::Quat(v[0], v[1], v[2], v[3]).normalized();
+}
+
+double wrap(double a) { return std::remainder(a, 2.0 * std::numbers::pi); }
+
+int body_eval(const BodyEvalOptions& opt) {
+  double window_from = 0.0, window_to = std::numeric_limits<double>::infinity();
+  const bool align = opt.align_window != "none";
+  if (align && opt.align_window != "all") {
+    const auto colon = opt.align_window.find(':');
+    char* end = nullptr;
+    bool ok = colon != std::string::npos;
+    if (ok) {
+      window_from = std::strtod(opt.align_window.c_str(), &end);
+      ok = end == opt.align_window.c_str() + colon;
+      window_to = std::strtod(opt.align_window.c_str() + colon + 1, &end);
+      ok = ok && *end == '\0' && std::isfinite(window_from) && std::isfinite(window_to) && window_to > window_from &&
+           window_from >= 0.0;
+    }
+    if (!ok)
+      throw UsageError("--align-window must be all, none or A:B in seconds with B > A >= 0, not '" + opt.align_window +
+                       "'");
+  }
+  ProcessOptions p;
+  p.input = opt.input;
+  p.body_path = opt.body_path;
+  p.filters = opt.filters;
+  std::vector<std::string> notes;
+  fusion::BodyModel body;
+  ProcessInput in = load_input(p, body, notes);
+  if (in.truth.empty())
+    throw UsageError(opt.input + ": no reference orientation (opt_quat, or bsn/truth/orientation) to score against");
+  std::vector<TruthTrack> truth(body.segments.size());
+  for (const bsn::Orientation& o : in.truth) {
+    const auto seg = body.find_segment(o.segment());
+    if (seg) truth[*seg][o.timestamp_ns()] = dds::to_quat(o.quat());
+  }
+  const std::vector<Event> events =
+      merge_events(in, p.order.empty() ? (in.session ? "arrival" : "time") : p.order, false);
+  FusionPipeline pipeline(
+      body, opt.body_path.empty() ? fusion::BodyFusion::Calibrations{} : config::load_body_calibrations(opt.body_path),
+      {}, 0);
+  // Per segment: the estimate and the truth in the published frame, and their time.
+  std::vector<std::vector<fusion::Quat>> seg_est(body.segments.size()), seg_truth(body.segments.size());
+  std::vector<std::vector<double>> seg_t(body.segments.size());
+  std::vector<JointSeries> joints(body.segments.size());
+  std::vector<bsn::RawSample> raws(in.tracks.size());
+  for (std::size_t k = 0; k < in.tracks.size(); ++k) raws[k].node_id(body.segments[in.tracks[k].segment].node);
+  std::optional<std::uint64_t> t0;
+  auto frame_of = [&](std::size_t segment, const fusion::Quat& q_sensor, bool aligned) {
+    return aligned ? fusion::segment_orientation(q_sensor, pipeline.fusion().segment(segment).sensor_to_segment)
+                   : q_sensor;
+  };
+  for (const Event& ev : events) {
+    const NodeTrack& t = in.tracks[ev.track];
+    const std::size_t i = ev.index;
+    bsn::RawSample& raw = raws[ev.track];
+    fill_raw(t, i, raw);
+    if (!t0) t0 = t.timestamp_ns[i];
+    const fusion::SampleResult& r = pipeline.process(raw, t.timestamp_ns[i]);
+    if (r.outcome != fusion::SampleOutcome::kEstimated) continue;
+    const auto truth_now = truth[r.segment].find(t.timestamp_ns[i]);
+    if (truth_now == truth[r.segment].end()) continue;
+    const double ts = 1e-9 * static_cast<double>(t.timestamp_ns[i] - *t0);
+    seg_t[r.segment].push_back(ts);
+    seg_est[r.segment].push_back(r.orientation);
+    seg_truth[r.segment].push_back(frame_of(r.segment, truth_now->second, r.aligned));
+    if (!r.joint) continue;
+    const auto parent_truth = truth[r.joint->parent].find(t.timestamp_ns[i]);
+    if (parent_truth == truth[r.joint->parent].end()) continue;
+    JointSeries& j = joints[r.segment];
+    j.name = fusion::joint_name(body.segments[r.segment]);
+    j.parent = r.joint->parent;
+    j.child = r.segment;
+    j.convention = r.joint->convention;
+    j.aligned = r.joint->aligned;
+    j.t_s.push_back(ts);
+    j.est.push_back(r.joint->relative);
+    j.truth.push_back(
+        fusion::canonical(fusion::relative_orientation(frame_of(r.joint->parent, parent_truth->second, j.aligned),
+                                                       frame_of(r.segment, truth_now->second, j.aligned))));
+  }
+  // The per-segment constant alignment: q_truth = q_est * B over the window (B in the published frame).
+  std::vector<fusion::Quat> alignment(body.segments.size(), fusion::Quat::Identity());
+  if (align) {
+    for (std::size_t s = 0; s < body.segments.size(); ++s) {
+      std::vector<fusion::Quat> d;
+      for (std::size_t k = 0; k < seg_t[s].size(); ++k)
+        if (seg_t[s][k] >= window_from && seg_t[s][k] <= window_to)
+          d.push_back(seg_est[s][k].conjugate() * seg_truth[s][k]);
+      if (!d.empty()) alignment[s] = mean_rotation(d);
+    }
+  }
+  std::string json = "{\"input\": " + io::json_string(opt.input) +
+                     ", \"align_window\": " + io::json_string(opt.align_window) + ", \"segments\": {";
+  std::string table = "segment            total  heading  inclination  (deg RMS, aligned)\n";
+  bool first = true;
+  for (std::size_t s = 0; s < body.segments.size(); ++s) {
+    if (seg_t[s].empty()) continue;
+    fusion::RmsErrorAccumulator raw_acc, aligned_acc;
+    for (std::size_t k = 0; k < seg_t[s].size(); ++k) {
+      raw_acc.add(fusion::error_angles(seg_est[s][k], seg_truth[s][k]));
+      aligned_acc.add(fusion::error_angles(seg_est[s][k] * alignment[s], seg_truth[s][k]));
+    }
+    auto angles = [](const fusion::ErrorAngles& e) {
+      return "{\"total_deg\": " + io::json_number(e.total * 180 / std::numbers::pi, 9) +
+             ", \"heading_deg\": " + io::json_number(e.heading * 180 / std::numbers::pi, 9) +
+             ", \"inclination_deg\": " + io::json_number(e.inclination * 180 / std::numbers::pi, 9) + "}";
+    };
+    json += std::string(first ? "" : ", ") + io::json_string(body.segments[s].name) +
+            ": {\"samples\": " + std::to_string(seg_t[s].size()) + ", \"unaligned\": " + angles(raw_acc.rms()) +
+            ", \"aligned\": " + angles(aligned_acc.rms()) + "}";
+    first = false;
+    char line[200];
+    const auto e = aligned_acc.rms();
+    std::snprintf(line, sizeof line, "%-16s %7.2f %8.2f %12.2f\n", body.segments[s].name.c_str(),
+                  e.total * 180 / std::numbers::pi, e.heading * 180 / std::numbers::pi,
+                  e.inclination * 180 / std::numbers::pi);
+    table += line;
+  }
+  json += "}, \"joints\": {";
+  table += "joint              relative  anatomical 1/2/3   (deg RMS, unaligned | aligned)\n";
+  first = true;
+  for (const JointSeries& j : joints) {
+    if (j.t_s.empty()) continue;
+    const bool anatomical = j.convention.type != fusion::JointType::kNone && j.aligned;
+    auto figures = [&](bool aligned) {
+      double rel_sq = 0.0;
+      Eigen::Vector3d anat_sq = Eigen::Vector3d::Zero();
+      for (std::size_t k = 0; k < j.t_s.size(); ++k) {
+        const fusion::Quat est =
+            aligned ? fusion::Quat(alignment[j.parent].conjugate() * j.est[k] * alignment[j.child]) : j.est[k];
+        const double e = fusion::angle_between(est, j.truth[k]);
+        rel_sq += e * e;
+        if (anatomical) {
+          const fusion::Vec3 a =
+              fusion::anatomical_angles(est, j.convention) - fusion::anatomical_angles(j.truth[k], j.convention);
+          for (int c = 0; c < 3; ++c) anat_sq[c] += wrap(a[c]) * wrap(a[c]);
+        }
+      }
+      const double n = static_cast<double>(j.t_s.size());
+      std::array<double, 4> out{std::sqrt(rel_sq / n) * 180 / std::numbers::pi, 0, 0, 0};
+      for (int c = 0; c < 3; ++c) out[c + 1] = std::sqrt(anat_sq[c] / n) * 180 / std::numbers::pi;
+      return out;
+    };
+    const auto names = fusion::anatomical_angle_names(j.convention.type);
+    auto to_json = [&](const std::array<double, 4>& f) {
+      std::string s = "{\"relative_deg\": " + io::json_number(f[0], 9);
+      if (anatomical) {
+        s += ", \"anatomical_deg\": {";
+        for (int c = 0; c < 3; ++c)
+          s +=
+              std::string(c ? ", " : "") + io::json_string(std::string(names[c])) + ": " + io::json_number(f[c + 1], 9);
+        s += "}";
+      }
+      return s + "}";
+    };
+    const auto plain = figures(false), aligned = figures(true);
+    json += std::string(first ? "" : ", ") + io::json_string(j.name) +
+            ": {\"samples\": " + std::to_string(j.t_s.size()) + ", \"unaligned\": " + to_json(plain) +
+            ", \"aligned\": " + to_json(aligned) + "}";
+    first = false;
+    char line[240];
+    if (anatomical) {
+      std::snprintf(line, sizeof line, "%-16s %8.2f  %5.2f %5.2f %5.2f | %8.2f  %5.2f %5.2f %5.2f\n", j.name.c_str(),
+                    plain[0], plain[1], plain[2], plain[3], aligned[0], aligned[1], aligned[2], aligned[3]);
+    } else {  // no anatomy, or a segment of the joint not aligned: the relative orientation only
+      std::snprintf(line, sizeof line, "%-16s %8.2f      -     -     - | %8.2f      -     -     -\n", j.name.c_str(),
+                    plain[0], aligned[0]);
+    }
+    table += line;
+  }
+  json += "}}";
+  if (!opt.plot_path.empty()) {
+    // Each joint's relative-orientation error (aligned) over time, one polyline per joint.
+    constexpr double kW = 800, kH = 300;
+    double t_max = 1e-9, e_max = 1e-9;
+    std::vector<std::vector<std::pair<double, double>>> lines;
+    for (const JointSeries& j : joints) {
+      if (j.t_s.empty()) continue;
+      auto& l = lines.emplace_back();
+      for (std::size_t k = 0; k < j.t_s.size(); k += std::max<std::size_t>(1, j.t_s.size() / 2000)) {
+        const double e =
+            fusion::angle_between(fusion::Quat(alignment[j.parent].conjugate() * j.est[k] * alignment[j.child]),
+                                  j.truth[k]) *
+            180 / std::numbers::pi;
+        l.emplace_back(j.t_s[k], e);
+        t_max = std::max(t_max, j.t_s[k]);
+        e_max = std::max(e_max, e);
+      }
+    }
+    std::ofstream svg(opt.plot_path);
+    svg << "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" << kW << "\" height=\"" << kH + 40 << "\">\n"
+        << "<text x=\"10\" y=\"20\" font-size=\"14\">joint error (deg, aligned) over time (s); max " << e_max
+        << " deg, " << t_max << " s</text>\n";
+    const char* colours[] = {"#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2"};
+    std::size_t c = 0;
+    for (const JointSeries& j : joints) {
+      if (j.t_s.empty()) continue;
+      svg << "<polyline fill=\"none\" stroke=\"" << colours[c % 7] << "\" points=\"";
+      for (const auto& [t, e] : lines[c]) svg << t / t_max * kW << "," << 30 + kH - e / e_max * kH << " ";
+      svg << "\"><title>" << j.name << "</title></polyline>\n";
+      ++c;
+    }
+    svg << "</svg>\n";
+    if (!svg) throw io::IoError(opt.plot_path + ": cannot write");
+  }
+  for (const std::string& n : notes) std::fprintf(stderr, "bsn eval: note: %s\n", n.c_str());
+  std::fputs(opt.json ? (json + "\n").c_str() : table.c_str(), stdout);
+  return 0;
+}
+
+}  // namespace
+
+int run_body_eval(const BodyEvalOptions& opt) {
+  try {
+    return body_eval(opt);
+  } catch (const UsageError& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  } catch (const config::ConfigError& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  } catch (const io::IoError& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 1;
+  } catch (const std::invalid_argument& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  }
 }
 
 }  // namespace bsn::services

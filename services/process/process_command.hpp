@@ -29,6 +29,20 @@ struct ProcessOptions {
 /// Returns the exit code: 0, 1 (a read or write failure) or 2 (a usage error: a bad option, body or input).
 int run_process(const ProcessOptions& options);
 
+/// `bsn eval --body`: the recordings' reference orientation per segment (BROAD opt_quat, or a session's
+/// bsn/truth/orientation) against the body pipeline's estimates: per segment the BROAD error angles, per joint the
+/// RMS of the relative orientation's error and of the named anatomical angles, without and with a per-segment
+/// constant alignment (fitted over `align_window`).
+struct BodyEvalOptions {
+  std::string input;  ///< as ProcessOptions::input
+  std::string body_path;
+  std::vector<std::string> filters;
+  std::string align_window = "all";  ///< all, none, or A:B (seconds from the first sample)
+  bool json = false;
+  std::string plot_path;  ///< SVG of each joint's error over time ("" = none)
+};
+int run_body_eval(const BodyEvalOptions& options);
+
 Command process_command();
 
 }  // namespace bsn::services

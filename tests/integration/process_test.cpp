@@ -5,10 +5,14 @@
 
 #include <cmath>
 #include <map>
+#include <numbers>
 #include <thread>
 #include <tuple>
 
+#include "bsn/fusion/body_fusion.hpp"
 #include "bsn/io/session_file.hpp"
+#include "bsn/sim/scenario.hpp"
+#include "bsn/sim/scenario_file.hpp"
 #include "process_fixture.hpp"
 
 namespace bsn::integration {
@@ -170,6 +174,105 @@ TEST_F(Process, AFolderOfRecordingsIsDeterministicAndExportable) {
       << output("ekf");
   EXPECT_NE(io::SessionReader((dir() / "ekf.h5").string()).attributes().at("filter_parameters").find("ekf"),
             std::string::npos);
+}
+
+// The first number after `key` at or after `from` in `text` (a JSON figure), NaN if none.
+double number_after(const std::string& text, std::size_t from, const std::string& key) {
+  const std::size_t at = text.find("\"" + key + "\": ", from);
+  if (at == std::string::npos) return std::nan("");
+  return std::strtod(text.c_str() + at + key.size() + 4, nullptr);
+}
+
+TEST_F(Process, EvalBodyReproducesTheSimulatorsJointErrors) {
+  // bsn eval --body scores a simulated walk's joints against the recordings' reference orientations. The test
+  // computes the same figures directly: BodyFusion on the simulator's samples in the same order, against the
+  // simulator's own joint truth (ScenarioSample::joint_anatomical and joint_relative, from its segment frames, not
+  // from the files). The sensors sit along their segments (the default mounting, given as sensor_axes), no jitter.
+  const std::string scenario = R"(name: walk0
+description: "walking, sensors along their segments"
+duration_s: 20
+rate_hz: 100
+seed: 4
+sensors:
+  preset: consumer_mems
+  mag: {hard_iron: [0, 0, 0], soft_iron: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]}
+  jitter_s: 0
+body:
+  kind: lower_body
+  pose: {position_m: [0, 0, 0.95]}
+  mounting: {max_rotation_deg: 0, max_offset_m: 0}
+  gait: {cadence_steps_per_min: 110, speed_m_s: 1.2, heading_deg: 90}
+)";
+  write_file(dir() / "walk0.yaml", scenario);
+  std::string body_yaml = "segments:\n";
+  const std::vector<std::array<std::string, 3>> segments{
+      {"pelvis", "", ""}, {"thigh_l", "pelvis", "hip_l"}, {"shank_l", "thigh_l", "knee_l"}};
+  for (const auto& [name, parent, joint] : segments) {
+    body_yaml += "  - name: " + name + "\n    sensor_axes: [anterior, left, up]\n";
+    if (!parent.empty()) body_yaml += "    parent: " + parent + "\n    joint: " + joint + "\n";
+  }
+  write_file(dir() / "leg0.yaml", body_yaml);
+  ASSERT_EQ(run("sim", {"sim", "--scenario", (dir() / "walk0.yaml").string(), "--out", (dir() / "lab0").string()}), 0)
+      << output("sim");
+  ASSERT_EQ(run("eval", {"eval", "--body", (dir() / "leg0.yaml").string(), (dir() / "lab0").string(), "--json",
+                         "--plot", (dir() / "joints.svg").string()}),
+            0)
+      << output("eval");
+  const std::string json = output("eval");
+  EXPECT_NE(read_file(dir() / "joints.svg").find("<polyline"), std::string::npos);
+
+  // The direct computation.
+  fusion::BodyModel body;
+  for (const auto& [name, parent, joint] : segments) {
+    fusion::SegmentSpec s;
+    s.name = s.node = name;
+    s.parent = parent;
+    s.joint = joint;
+    s.sensor_to_segment = fusion::default_sensor_to_segment();
+    body.segments.push_back(s);
+  }
+  fusion::BodyFusion fusion(body, {}, {}, 0);
+  sim::ScenarioRunner runner(sim::load_scenario((dir() / "walk0.yaml").string()), {"pelvis", "thigh_l", "shank_l"},
+                             false);
+  std::map<std::string, std::pair<double, std::array<double, 3>>> sq;  // per joint: relative, anatomical squared errors
+  std::map<std::string, std::size_t> n;
+  std::vector<sim::ScenarioSample> out;
+  for (std::uint64_t k = 0; runner.next(out); ++k) {
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      const fusion::SampleResult& r = fusion.process({segments[i][0], k, out[i].sample}, out[i].sample.timestamp_ns);
+      if (r.outcome != fusion::SampleOutcome::kEstimated || !r.joint) continue;
+      auto& [rel, anat] = sq[segments[i][2]];
+      const double e = fusion::angle_between(r.joint->relative, *out[i].joint_relative);
+      rel += e * e;
+      for (int c = 0; c < 3; ++c) {
+        const double d = std::remainder(r.joint->anatomical[c] - out[i].joint_anatomical[c], 2 * std::numbers::pi);
+        anat[c] += d * d;
+      }
+      ++n[segments[i][2]];
+    }
+  }
+  ASSERT_EQ(n.size(), 2u);
+  const double deg = 180.0 / std::numbers::pi;
+  for (const auto& [joint, count] : n) {
+    SCOPED_TRACE(joint);
+    ASSERT_EQ(count, 2000u);
+    const std::size_t at = json.find("\"" + joint + "\": {\"samples\": ");
+    ASSERT_NE(at, std::string::npos) << json;
+    EXPECT_EQ(number_after(json, at, "samples"), 2000.0);
+    const std::size_t unaligned = json.find("\"unaligned\"", at);
+    const auto& [rel, anat] = sq[joint];
+    EXPECT_NEAR(number_after(json, unaligned, "relative_deg"), std::sqrt(rel / 2000.0) * deg, 0.01) << json;
+    const auto names = fusion::anatomical_angle_names(fusion::infer_joint_convention(joint).type);
+    for (int c = 0; c < 3; ++c)
+      EXPECT_NEAR(number_after(json, unaligned, std::string(names[c])), std::sqrt(anat[c] / 2000.0) * deg, 0.01)
+          << names[c] << "\n"
+          << json;
+  }
+  // A bad window is a usage error naming the option.
+  EXPECT_EQ(run("window",
+                {"eval", "--body", (dir() / "leg0.yaml").string(), (dir() / "lab0").string(), "--align-window", "5:1"}),
+            2);
+  EXPECT_NE(output("window").find("--align-window"), std::string::npos) << output("window");
 }
 
 TEST_F(Process, BadInputsAreUsageErrors) {
