@@ -71,6 +71,10 @@ const std::map<std::string, std::string>& examples() {
        "  bsn export walk.h5 --format sto --out walk/ --frames sensor --from 5 --to 35\n"
        "  bsn export walk.h5 --format csv --out walk/      one CSV per topic with units\n"
        "  bsn export walk.h5 --format broad --out walk/    per node, for bsn eval"},
+      {"process",
+       "  bsn process walk.h5 --out walk-offline.h5               the session again, its body and calibrations\n"
+       "  bsn process walk.h5 --body legs.yaml --filter ekf --out walk-ekf.h5\n"
+       "  bsn process lab/ --body legs.yaml --out lab.h5           a folder of <node>.hdf5 or <node>.csv"},
       {"node",
        "  bsn node --source serial:/dev/ttyUSB0?baud=115200 --node thigh_l\n"
        "  bsn node --source udp:9000 --node hand_r --map hand_r.map.yaml\n"

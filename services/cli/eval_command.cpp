@@ -9,6 +9,7 @@
 #include "bsn/eval/evaluation.hpp"
 #include "bsn/eval/standard_tests.hpp"
 #include "bsn/io/recording.hpp"
+#include "process_command.hpp"
 #include "progress_bar.hpp"
 #include "tools.hpp"
 
@@ -22,6 +23,8 @@ struct EvalOptions {
   std::string plot_path;             ///< write an SVG of error over time here ("" = no plot)
   bool standard_tests = false;       ///< run Fan et al. 2018's tests A-E on the simulator instead of recordings
   std::string scenario_dir;          ///< where fan_a..fan_e.yaml are ("" = default_scenario_dir())
+  std::string body_path;             ///< a body: score segments and joints (run_body_eval)
+  std::string align_window = "all";  ///< with a body: the window of the per-segment alignment
 };
 
 // The scenarios of this checkout when bsn runs from its build tree, else those installed beside the program
@@ -34,6 +37,13 @@ std::string default_scenario_dir() {
 namespace fs = std::filesystem;
 
 int run_eval(const EvalOptions& opt) {
+  if (!opt.body_path.empty()) {
+    if (opt.inputs.size() != 1) {
+      std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");
+      return 2;
+    }
+    return run_body_eval({opt.inputs[0], opt.body_path, opt.filters, opt.align_window, opt.json, opt.plot_path});
+  }
   std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
   try {
     std::vector<std::string> args = opt.filters;
@@ -179,6 +189,12 @@ Command eval_command() {
             cmd->add_option("--filter", opt->filters, "NAME or NAME:key=value,...; repeatable; 'all' = every filter")
                 ->take_all();
             cmd->add_flag("--json", opt->json, "print one JSON object instead of the table");
+            cmd->add_option("--body", opt->body_path,
+                            "a body model: score its segments and joints against the recordings' reference "
+                            "orientations (one session file or folder of <node>.hdf5)");
+            cmd->add_option("--align-window", opt->align_window,
+                            "with --body: per-segment constant alignment fitted over all, none or A:B (seconds)")
+                ->capture_default_str();
             cmd->add_option("--plot", opt->plot_path, "write an SVG image of the total error over time per filter");
             cmd->add_flag("--standard-tests", opt->standard_tests,
                           "run Fan et al. 2018's tests A-E on the simulator and print their Table 5 with grades");

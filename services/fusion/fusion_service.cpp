@@ -25,11 +25,6 @@ std::string default_process_id() {
   return std::string("fusion@") + host + ":" + std::to_string(getpid());
 }
 
-std::uint32_t to_wire_flags(const fusion::FilterFlags& f) {
-  return (f.resting ? bsn::FLAG_RESTING : 0u) | (f.mag_rejected ? bsn::FLAG_MAG_REJECTED : 0u) |
-         (f.initialising ? bsn::FLAG_INITIALISING : 0u) | (f.reinitialised ? bsn::FLAG_REINITIALISED : 0u);
-}
-
 double seconds(std::uint64_t ns) { return std::chrono::duration<double>(std::chrono::nanoseconds(ns)).count(); }
 
 }  // namespace
@@ -37,10 +32,10 @@ double seconds(std::uint64_t ns) { return std::chrono::duration<double>(std::chr
 FusionService::FusionService(dds::Participant& participant, fusion::BodyModel body, Options options)
     : participant_(participant),
       options_(std::move(options)),
-      fusion_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
+      pipeline_(std::move(body), options_.calibrations, options_, dds::monotonic_ns()),
+      fusion_(pipeline_.fusion()),
       accepted_at_window_start_(fusion_.body().segments.size(), 0),
       rate_hz_(fusion_.body().segments.size(), 0.0),
-      calibration_id_(fusion_.body().segments.size()),
       conflict_logged_ns_(fusion_.body().segments.size(), 0),
       not_permitted_(fusion_.body().segments.size(), 0),
       not_permitted_logged_ns_(fusion_.body().segments.size(), 0) {
@@ -83,72 +78,37 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
 }
 
 void FusionService::on_calibration(const bsn::CalibrationResult& r) {
-  if (!r.success()) return;  // a failed calibration changes nothing; the service republishes the one in effect
-  if (r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT) {
-    on_alignment(r);
-    return;
-  }
-  const char* channel = r.kind() == bsn::CALIBRATION_MAGNETOMETER    ? "magnetometer"
-                        : r.kind() == bsn::CALIBRATION_GYRO_BIAS     ? "gyroscope"
-                        : r.kind() == bsn::CALIBRATION_ACCELEROMETER ? "accelerometer"
-                                                                     : nullptr;
-  calib::ChannelCalibration c;
-  const auto& b = r.bias();
-  const auto& h = r.transform();
-  c.bias = calib::Vec3(b[0], b[1], b[2]);
-  c.transform << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
-  if (r.kind() == bsn::CALIBRATION_GYRO_BIAS) c.transform.setIdentity();
+  using Outcome = FusionPipeline::CalibrationOutcome;
   std::lock_guard lock(mutex_);
-  const auto segment = fusion_.segment_of(r.node_id());
-  if (!segment) return;  // a node of another body
-  if (channel == nullptr || !c.bias.allFinite() || !c.transform.allFinite() ||
-      !(std::abs(c.transform.determinant()) > 1e-12 * std::pow(c.transform.norm(), 3))) {
-    logging::log_warn("calibration '", r.request_id(), "' for node '", r.node_id(),
-                      "' refused: unknown kind, non-finite numbers or a singular transform");
+  const FusionPipeline::CalibrationApplied a = pipeline_.apply(r);
+  if (a.outcome == Outcome::kFailedResult || a.outcome == Outcome::kOtherBody || a.outcome == Outcome::kAlreadyApplied)
+    return;
+  const fusion::SegmentSpec& spec = fusion_.body().segments[a.segment];
+  const bool alignment = r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT;
+  if (a.outcome == Outcome::kRefused) {
+    if (alignment) {
+      logging::log_warn("alignment '", logging::printable(r.request_id()), "' for node '", spec.node,
+                        "' refused: sensor_to_segment is not a finite unit quaternion");
+    } else {
+      logging::log_warn("calibration '", r.request_id(), "' for node '", r.node_id(),
+                        "' refused: unknown kind, non-finite numbers or a singular transform");
+    }
     return;
   }
-  std::string& applied = applied_calibration_[{*segment, static_cast<int>(r.kind())}];
-  if (applied == r.request_id()) return;  // the same calibration again (republished after a failure)
-  calib::SensorCalibration update;
-  if (r.kind() == bsn::CALIBRATION_MAGNETOMETER) update.magnetometer = c;
-  if (r.kind() == bsn::CALIBRATION_GYRO_BIAS) update.gyroscope = c;
-  if (r.kind() == bsn::CALIBRATION_ACCELEROMETER) update.accelerometer = c;
-  fusion_.update_calibration(r.node_id(), update);
-  applied = r.request_id();
-  calibration_id_[*segment] = last_calibration_id_ = r.request_id();
-  const fusion::SegmentSpec& spec = fusion_.body().segments[*segment];
-  logging::log_info("node '", spec.node, "' (", spec.name, "): ", channel, " calibration '", r.request_id(),
-                    "' applied from its next sample on; its filter restarts");
-  status_due_ = true;
-}
-
-void FusionService::on_alignment(const bsn::CalibrationResult& r) {
-  const auto& w = r.sensor_to_segment();
-  const Eigen::Vector4d v(w[0], w[1], w[2], w[3]);
-  std::lock_guard lock(mutex_);
-  const auto segment = fusion_.segment_of(r.node_id());
-  if (!segment) return;  // a node of another body
-  const fusion::SegmentSpec& spec = fusion_.body().segments[*segment];
-  if (!v.allFinite() || !(std::abs(v.norm() - 1.0) < 1e-3)) {
-    logging::log_warn("alignment '", logging::printable(r.request_id()), "' for node '", spec.node,
-                      "' refused: sensor_to_segment is not a finite unit quaternion");
-    return;
-  }
-  // An alignment fitted with the node on another segment (another body file) would turn it into the wrong frame.
-  if (r.segment() != spec.name) {
+  if (a.outcome == Outcome::kWrongSegment) {
     logging::log_warn("alignment '", logging::printable(r.request_id()), "' for node '", spec.node,
                       "' was fitted for segment '", logging::printable(r.segment()),
                       "', but this body has the node on '", spec.name, "'; not applied");
     return;
   }
-  std::string& applied = applied_calibration_[{*segment, static_cast<int>(r.kind())}];
-  if (applied == r.request_id()) return;
-  fusion_.update_alignment(r.node_id(), fusion::Quat(v[0], v[1], v[2], v[3]).normalized());
-  applied = r.request_id();
-  calibration_id_[*segment] = last_calibration_id_ = r.request_id();
-  logging::log_info("node '", spec.node, "' (", spec.name, "): alignment '", r.request_id(), "' (",
-                    logging::printable(r.alignment_source()),
-                    ") applied from its next sample on: bsn/orientation reports the segment frame");
+  if (alignment) {
+    logging::log_info("node '", spec.node, "' (", spec.name, "): alignment '", r.request_id(), "' (",
+                      logging::printable(r.alignment_source()),
+                      ") applied from its next sample on: bsn/orientation reports the segment frame");
+  } else {
+    logging::log_info("node '", spec.node, "' (", spec.name, "): ", a.channel, " calibration '", r.request_id(),
+                      "' applied from its next sample on; its filter restarts");
+  }
   status_due_ = true;
 }
 
@@ -186,7 +146,7 @@ void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& wr
   {
     std::lock_guard lock(mutex_);
     const std::uint64_t now = dds::monotonic_ns();
-    const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, now, writer);
+    const fusion::SampleResult& r = pipeline_.process(raw, now, writer);
     if (r.outcome == fusion::SampleOutcome::kUnknownNode) {
       if (r.new_unknown_node)
         logging::log_warn("samples from node '", logging::printable(raw.node_id()),
@@ -202,12 +162,11 @@ void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& wr
     if (r.clock_reset)
       logging::log_warn("node '", spec.node, "': its clock moved to a new time base; restarting its filter");
     if (r.outcome != fusion::SampleOutcome::kEstimated) return;  // counted by BodyFusion, reported on bsn/status
-    fill_orientation(r, raw.timestamp_ns());
-    if (r.joint) fill_joint(*r.joint, raw.timestamp_ns());
     joint = r.joint.has_value();
   }
-  if (!orientation_writer_->write(orientation_msg_)) ++write_failures_;
-  if (joint && !joint_writer_->write(joint_msg_)) ++write_failures_;
+  // publish_mutex_ keeps the pipeline's messages whole until written (the next raw sample waits for it).
+  if (!orientation_writer_->write(pipeline_.orientation())) ++write_failures_;
+  if (joint && !joint_writer_->write(pipeline_.joint())) ++write_failures_;
 }
 
 void FusionService::log_source_events(const fusion::SampleResult& r, std::uint64_t now) {
@@ -252,34 +211,6 @@ void FusionService::on_status(const bsn::Status& other) {
   status_due_ = true;
 }
 
-void FusionService::fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns) {
-  const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
-  bsn::Orientation& o = orientation_msg_;
-  o.segment(spec.name);
-  o.node_id(spec.node);
-  o.timestamp_ns(timestamp_ns);
-  dds::fill_orientation(r.orientation, o);
-  o.gyro_bias({r.gyro_bias.x(), r.gyro_bias.y(), r.gyro_bias.z()});
-  o.flags(to_wire_flags(r.flags) | (r.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u));
-}
-
-void FusionService::fill_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns) {
-  const fusion::SegmentSpec& child = fusion_.body().segments[joint.child];
-  bsn::JointAngles& j = joint_msg_;
-  j.joint(fusion::joint_name(child));
-  j.parent(fusion_.body().segments[joint.parent].name);
-  j.child(child.name);
-  j.timestamp_ns(timestamp_ns);
-  j.quat(dds::to_wxyz(joint.relative));
-  j.axes(child.joint_axes.name());
-  j.angles({joint.angles.x(), joint.angles.y(), joint.angles.z()});
-  j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u) |
-          (joint.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u) | (joint.heading ? bsn::FLAG_HEADING_KINEMATIC : 0u));
-  dds::fill_anatomical(joint.convention, joint.anatomical, j);
-  j.heading_offset(joint.heading ? joint.heading->offset_rad : 0.0);
-  j.heading_observability(joint.heading ? joint.heading->observability : 0.0);
-}
-
 void FusionService::tick() {
   std::optional<bsn::Status> status;
   {
@@ -313,34 +244,19 @@ bsn::Status FusionService::make_status(std::uint64_t now) {
   st.period_s(rate_window_s_);
   std::vector<bsn::NodeStatus> nodes;
   for (std::size_t i = 0; i < fusion_.body().segments.size(); ++i) {
-    const fusion::SegmentSpec& spec = fusion_.body().segments[i];
     const fusion::BodyFusion::Segment& state = fusion_.segment(i);
-    const auto& c = state.gate.counters();
-    bsn::NodeStatus n;
-    n.node_id(spec.node);
-    n.segment(spec.name);
+    bsn::NodeStatus n = pipeline_.node_status(i);
     if (window_complete) {
-      rate_hz_[i] = static_cast<double>(c.accepted - accepted_at_window_start_[i]) / window;
-      accepted_at_window_start_[i] = c.accepted;
+      rate_hz_[i] = static_cast<double>(n.accepted() - accepted_at_window_start_[i]) / window;
+      accepted_at_window_start_[i] = n.accepted();
     }
     n.rate_hz(rate_hz_[i]);
-    n.received(c.received);
-    n.accepted(c.accepted);
-    n.missing(c.missing);
-    for (std::size_t r = 0; r <= fusion::kRejectionReasonCount; ++r) {  // the gate's reasons, then the filter's
-      bsn::ReasonCount& rc = n.rejected().emplace_back();
-      rc.reason(r < fusion::kRejectionReasonCount ? std::string(fusion::rejection_reason_name(r)) : "filter_rejected");
-      rc.count(r < fusion::kRejectionReasonCount ? c.rejected[r] : state.filter_rejected);
-    }
     if (participant_.secured()) {
       bsn::ReasonCount& rc = n.rejected().emplace_back();
       rc.reason("not_permitted");
       rc.count(not_permitted_[i]);
     }
-    n.clock_resets(c.clock_resets);
-    n.stale(state.stale);
     n.last_sample_age_s(state.last_arrival_ns ? seconds(now - *state.last_arrival_ns) : -1.0);
-    n.last_calibration_id(calibration_id_[i]);
     n.source_writer(state.source ? dds::writer_name(*state.source) : "");
     n.conflicting_writer(state.conflicting_source ? dds::writer_name(*state.conflicting_source) : "");
     n.source_handovers(state.source_handovers);
@@ -354,7 +270,7 @@ bsn::Status FusionService::make_status(std::uint64_t now) {
   st.unknown_nodes(std::move(unknown));
   st.qos_mismatches(participant_.qos_mismatches());
   st.write_failures(write_failures_);
-  st.last_calibration_id(last_calibration_id_);
+  st.last_calibration_id(pipeline_.last_calibration_id());
   st.undecodable_samples(participant_.undecodable_samples());
   st.dds_rejected_samples(participant_.rejected_samples());
   st.dds_lost_samples(participant_.lost_samples());

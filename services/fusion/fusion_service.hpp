@@ -12,6 +12,7 @@
 #include "bsn/dds/participant.hpp"
 #include "bsn/fusion/body_fusion.hpp"
 #include "command.hpp"
+#include "fusion_pipeline.hpp"
 
 namespace bsn::services {
 
@@ -40,10 +41,7 @@ class FusionService {
   void on_not_permitted(const bsn::RawSample& raw, const eprosima::fastrtps::rtps::GUID_t& writer);
   void log_source_events(const fusion::SampleResult& r, std::uint64_t now_ns);
   void on_calibration(const bsn::CalibrationResult& result);  ///< called from the DDS thread
-  void on_alignment(const bsn::CalibrationResult& result);    ///< a successful alignment, from on_calibration
-  void on_status(const bsn::Status& status);  ///< another process's status (DDS thread): a second fusion?
-  void fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);  ///< into orientation_msg_
-  void fill_joint(const fusion::JointEstimate& j, std::uint64_t timestamp_ns);       ///< into joint_msg_
+  void on_status(const bsn::Status& status);      ///< another process's status (DDS thread): a second fusion?
   bsn::Status make_status(std::uint64_t now_ns);  ///< with mutex_ held; restarts the rate window when due
 
   dds::Participant& participant_;
@@ -51,10 +49,11 @@ class FusionService {
   // No DDS write happens with mutex_ held: a write may deliver to this participant's own readers, whose locks the
   // DDS threads hold while their callbacks wait for mutex_ (our status to our status reader while on_status of
   // another fusion waits: a deadlock seen once in CI). Every status goes out from tick(), within one tick of its
-  // cause (status_due_). publish_mutex_ keeps the raw callbacks' orientation_msg_/joint_msg_ whole until written.
+  // cause (status_due_). publish_mutex_ keeps the pipeline's messages whole until written.
   std::mutex publish_mutex_;
   std::mutex mutex_;
-  fusion::BodyFusion fusion_;
+  FusionPipeline pipeline_;  ///< BodyFusion and the messages it fills: the same code as `bsn process`
+  fusion::BodyFusion& fusion_;
   // Rates are counted over windows of at least one status period, so that an early status (a node turning
   // stale or fresh) does not divide a burst by a few milliseconds.
   std::vector<std::uint64_t> accepted_at_window_start_;  ///< per segment
@@ -73,11 +72,6 @@ class FusionService {
   std::unique_ptr<dds::Reader<bsn::Status>> status_reader_;
   std::unique_ptr<dds::Reader<bsn::RawSample>> raw_reader_;
   std::unique_ptr<dds::Reader<bsn::CalibrationResult>> calibration_reader_;
-  /// Live calibrations: per segment the request id last applied (bsn/status), per (segment, kind) to apply each
-  /// result once; the last one applied to any node.
-  std::vector<std::string> calibration_id_;
-  std::map<std::pair<std::size_t, int>, std::string> applied_calibration_;
-  std::string last_calibration_id_;
   /// Per segment, when a conflicting writer was last logged (0: never): at most one line per kConflictLogPeriodNs.
   std::vector<std::uint64_t> conflict_logged_ns_;
   /// Per segment, samples of the node from a writer whose DDS partition does not name it (secured only): another
@@ -85,8 +79,6 @@ class FusionService {
   std::vector<std::uint64_t> not_permitted_;
   std::vector<std::uint64_t> not_permitted_logged_ns_;
   static constexpr std::uint64_t kConflictLogPeriodNs = 10'000'000'000;
-  bsn::Orientation orientation_msg_;
-  bsn::JointAngles joint_msg_;
 };
 
 /// `bsn fusion`: its options and what runs it.

@@ -1,0 +1,75 @@
+// The fusion service without its transport: bsn types in (raw samples, calibration results), BodyFusion, bsn types
+// out (orientations, joint angles). `bsn fusion` feeds it from DDS and `bsn process` from a file: one code path, so
+// the same samples and calibrations in the same order give the same numbers. No DDS entities, no clocks, no logging:
+// what a service logs comes back as outcomes.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "bsn/fusion/body_fusion.hpp"
+#include "bsn_idl/bsn.h"
+
+namespace bsn::services {
+
+class FusionPipeline {
+ public:
+  /// Throws std::invalid_argument as BodyFusion does (a filter spec or gate parameters it refuses).
+  FusionPipeline(fusion::BodyModel body, const fusion::BodyFusion::Calibrations& calibrations,
+                 const fusion::BodyFusion::Params& params, std::uint64_t start_ns);
+
+  /// One raw sample through BodyFusion. When the result is kEstimated, orientation() is its bsn/orientation
+  /// sample and, when it has a joint, joint() its bsn/joint_angles sample (valid until the next call).
+  const fusion::SampleResult& process(const bsn::RawSample& raw, std::uint64_t arrival_ns,
+                                      const fusion::SourceId& writer = {});
+  const bsn::Orientation& orientation() const { return orientation_msg_; }
+  const bsn::JointAngles& joint() const { return joint_msg_; }
+
+  enum class CalibrationOutcome {
+    kApplied,         ///< applied from the node's next sample on
+    kFailedResult,    ///< a failed calibration: nothing changes
+    kOtherBody,       ///< for a node on no segment of this body
+    kAlreadyApplied,  ///< this request id is in effect already (a republished result)
+    kRefused,         ///< unknown kind, non-finite numbers, a singular transform or a non-unit rotation
+    kWrongSegment,    ///< an alignment fitted for the node on another segment
+  };
+  struct CalibrationApplied {
+    CalibrationOutcome outcome = CalibrationOutcome::kOtherBody;
+    std::size_t segment = 0;        ///< unless kFailedResult or kOtherBody
+    const char* channel = nullptr;  ///< "magnetometer", "gyroscope", "accelerometer", "alignment"; null if unknown
+  };
+  /// A calibration result as the calibration service publishes it (bsn/calibration/result): the channel's
+  /// calibration replaces the segment's (its filter restarts), an alignment the sensor-to-segment rotation.
+  CalibrationApplied apply(const bsn::CalibrationResult& result);
+
+  fusion::BodyFusion& fusion() { return fusion_; }
+  const fusion::BodyFusion& fusion() const { return fusion_; }
+  const fusion::BodyModel& body() const { return fusion_.body(); }
+  /// The request id of the calibration last applied to a segment ("" if none), and to any node.
+  const std::string& calibration_id(std::size_t segment) const { return calibration_id_.at(segment); }
+  const std::string& last_calibration_id() const { return last_calibration_id_; }
+  /// A segment's node on bsn/status as far as the pipeline knows it: ids, the gate's and the filter's counters,
+  /// staleness, the calibration in effect and the writer handovers (rate, age and writer names are the service's).
+  bsn::NodeStatus node_status(std::size_t segment) const;
+
+ private:
+  void fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns);
+  void fill_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns);
+
+  fusion::BodyFusion fusion_;
+  std::vector<std::string> joint_names_;  ///< per segment, so that a joint sample allocates nothing
+  std::vector<std::string> calibration_id_;
+  std::map<std::pair<std::size_t, int>, std::string> applied_calibration_;  ///< per (segment, kind): request id
+  std::string last_calibration_id_;
+  bsn::Orientation orientation_msg_;
+  bsn::JointAngles joint_msg_;
+};
+
+/// The wire flags of a filter's flags (bsn::FLAG_RESTING, ...).
+std::uint32_t to_wire_flags(const fusion::FilterFlags& flags);
+
+}  // namespace bsn::services
