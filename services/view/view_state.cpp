@@ -128,17 +128,25 @@ std::optional<std::string> ViewState::on_joint(const bsn::JointAngles& j, std::u
   }
   if (!due(*slot, now_ns)) return std::nullopt;
   const bool named = !j.anatomy().empty() && j.anatomical_names().size() == 3;
-  std::string names;
+  std::string names = ",\"anatomy\":" + name_of(named ? j.anatomy() : std::string()) +
+                      ",\"side\":" + name_of(j.side()) + ",\"names\":[";
   if (named)
-    names = name_of(j.anatomical_names()[0]) + "," + name_of(j.anatomical_names()[1]) + "," +
-            name_of(j.anatomical_names()[2]);
-  slot->latest = "{\"k\":\"j\",\"joint\":" + name_of(j.joint()) + ",\"parent\":" + name_of(j.parent()) +
-                 ",\"child\":" + name_of(j.child()) + ",\"axes\":" + name_of(j.axes()) +
-                 ",\"ts\":" + std::to_string(j.timestamp_ns()) + ",\"deg\":[" + number(a[0] * kDeg) + "," +
-                 number(a[1] * kDeg) + "," + number(a[2] * kDeg) + "],\"flags\":" + std::to_string(j.flags()) +
-                 ",\"anatomy\":" + name_of(named ? j.anatomy() : std::string()) + ",\"side\":" + name_of(j.side()) +
-                 ",\"names\":[" + names + "],\"anat\":[" + number(n[0] * kDeg) + "," + number(n[1] * kDeg) + "," +
-                 number(n[2] * kDeg) + "]}";
+    names += name_of(j.anatomical_names()[0]) + "," + name_of(j.anatomical_names()[1]) + "," +
+             name_of(j.anatomical_names()[2]);
+  names += "]";
+  const std::string head = "{\"k\":\"j\",\"joint\":" + name_of(j.joint()) + ",\"parent\":" + name_of(j.parent()) +
+                           ",\"child\":" + name_of(j.child()) + ",\"axes\":" + name_of(j.axes()) +
+                           ",\"ts\":" + std::to_string(j.timestamp_ns()) + ",\"deg\":[" + number(a[0] * kDeg) + "," +
+                           number(a[1] * kDeg) + "," + number(a[2] * kDeg) + "],\"flags\":" + std::to_string(j.flags());
+  const std::string tail =
+      ",\"anat\":[" + number(n[0] * kDeg) + "," + number(n[1] * kDeg) + "," + number(n[2] * kDeg) + "]}";
+  // The names go to the browsers when they change and once a second (a slow browser's queue may drop a message);
+  // the snapshot (a new browser's first messages) always has them. They are most of a message's bytes, and 20
+  // browsers get every message.
+  slot->latest = head + names + tail;
+  if (names == slot->names && now_ns < slot->names_due_ns) return head + tail;
+  slot->names = std::move(names);
+  slot->names_due_ns = now_ns + 1'000'000'000ull;
   return slot->latest;
 }
 

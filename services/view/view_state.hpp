@@ -11,7 +11,10 @@
 //   {"k":"j","joint":J,"parent":P,"child":C,"axes":A,"ts":NS,"deg":[a,b,c],"flags":F,
 //    "anatomy":T,"side":S,"names":[n1,n2,n3],"anat":[a,b,c]}                   joint angles, degrees: the axis
 //                                                                               sequence's, and the named anatomical
-//                                                                               ones (names [] without an anatomy)
+//                                                                               ones (names [] without an anatomy;
+//                                                                               anatomy, side and names when they
+//                                                                               change and once a second, and in the
+//                                                                               snapshot)
 //   {"k":"s","process":P,"nodes":[{"node":N,"seg":S,"rate":HZ,"stale":B,"calib":ID},...]}  status
 // Orientations, truth and joint angles are passed on at most kMaxRateHz per segment (joint), on one fixed grid for
 // all, so that a 100 Hz source gives the full rate and the messages of all segments come together.
@@ -68,7 +71,9 @@ class ViewState {
  private:
   struct Limited {
     std::uint64_t next_due_ns = 0;
-    std::string latest;  ///< the last message sent
+    std::string latest;              ///< the last message sent (joints: with their names, for the snapshot)
+    std::string names;               ///< joints: the "anatomy", "side" and "names" members last sent
+    std::uint64_t names_due_ns = 0;  ///< joints: when they go again (a browser's queue may have dropped them)
   };
   /// True if a message of this slot may go now; moves it on to the next grid point.
   static bool due(Limited& slot, std::uint64_t now_ns);

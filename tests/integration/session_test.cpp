@@ -55,5 +55,34 @@ TEST_F(ProcessTest, SessionAlignsRecordsExportsAndStopsEverything) {
     EXPECT_TRUE(std::filesystem::exists(dir() / "calib" / (std::string(node) + ".alignment.calib.yaml"))) << node;
 }
 
+TEST_F(ProcessTest, ABadSessionFileStopsBeforeAnythingRunsNamingItsLine) {
+  const std::string body = (kRepository / "bodies/lower_body.yaml").string();
+  const std::string scenario = (kRepository / "sim_publishers/scenarios/gait_alignment.yaml").string();
+  const std::string good = "body: " + body + "\nnodes:\n  simulated: {scenario: " + scenario +
+                           "}\nrecord: {out: " + (dir() / "trials").string() + ", duration_s: 5}\n";
+  std::filesystem::create_directories(dir() / "trials");
+  write_file(dir() / "trials" / "taken.h5", "");
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {good + "colour: red\n", ":5: unknown key 'colour' in the session"},
+      {"nodes:\n  simulated: {scenario: " + scenario + "}\nrecord: {duration_s: 5}\n", "the session needs body"},
+      {good + "trials: [walk, ../up]\n", ":5: trial name '../up'"},
+      {good + "export: [sto, mp4]\n", ":5: unknown format 'mp4'"},
+      {"body: " + body + "\nnodes:\n  simulated: {scenario: " + scenario + "}\nrecord: {duration_s: -5}\n",
+       ":4: record.duration_s must be in (0, 86400] s"},
+      {good + "record_typo: 1\n", "unknown key 'record_typo'"},
+      {good + "trials: [taken]\n", "taken.h5 exists"},
+  };
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    const auto file = dir() / ("s" + std::to_string(i) + ".yaml");
+    write_file(file, cases[i].first);
+    const std::string name = "bad" + std::to_string(i);
+    auto& p = spawn(name, {"session", file.string(), "--domain", std::to_string(test_domain(96))});
+    EXPECT_EQ(exit_code(p.wait_for(20s)), 2) << cases[i].first << read_file(log_path(name));
+    EXPECT_NE(read_file(log_path(name)).find(cases[i].second), std::string::npos) << cases[i].first << "\n"
+                                                                                  << read_file(log_path(name));
+  }
+  EXPECT_TRUE(bsn_processes_in_domain(test_domain(96)).empty());
+}
+
 }  // namespace
 }  // namespace bsn::integration

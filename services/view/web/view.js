@@ -286,7 +286,10 @@ function onJoint(m) {
     j = view.joints[m.joint] = {histAnat: [[], [], []], histSeq: [[], [], []]};
   }
   Object.assign(j, {parent: m.parent, child: m.child, axes: m.axes, ts: m.ts, deg: m.deg, flags: m.flags,
-                    anatomy: m.anatomy || "", side: m.side || "", names: m.names || [], anat: m.anat || [0, 0, 0]});
+                    anat: m.anat || [0, 0, 0]});
+  // The names come when they change (and in a new page's first messages); a message without them keeps the last.
+  if (m.names !== undefined) Object.assign(j, {anatomy: m.anatomy || "", side: m.side || "", names: m.names});
+  if (!j.names) j.names = [];
   view.parentOf[m.child] = m.parent;
   if (!j.chart) j.chart = makeChart(m.joint, j);
   if (t0 === null) t0 = m.ts;

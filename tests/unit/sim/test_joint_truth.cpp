@@ -102,5 +102,27 @@ TEST(SimJointTruth, SensorsAreMountedAtRandom) {
     EXPECT_LT(fusion::angle_between(exact.segment(i).sensor_to_segment, Quat::Identity()), 1e-12);
 }
 
+TEST(SimJointTruth, SegmentTruthIsTheSensorTruthTurnedByTheTrueMounting) {
+  // The truth of an aligned estimate (bsn/truth/segment_orientation) is the sensor's truth without its mounting:
+  // q_segment = q_sensor * conj(sensor_to_segment), the mounting an exact alignment finds; and standing in the N-pose
+  // every segment's ISB long axis Y points up.
+  const ScenarioSpec spec = walking_session(2.0);
+  ScenarioRunner runner(spec, {}, true);
+  std::vector<ScenarioSample> samples;
+  double worst = 0.0;
+  for (std::uint64_t k = 0; runner.next(samples); ++k) {
+    for (std::size_t j = 0; j < samples.size(); ++j) {
+      const Quat expected =
+          fusion::segment_orientation(samples[j].truth, true_sensor_to_segment(runner.body().segment(j)));
+      worst = std::max(worst, fusion::angle_between(samples[j].segment_truth, expected));
+      if (k == 100) {  // 1 s into the first N-pose
+        SCOPED_TRACE(runner.body().segment(j).name);
+        EXPECT_GT((samples[j].segment_truth * Vec3::UnitY()).z(), std::cos(2 * kDeg));
+      }
+    }
+  }
+  EXPECT_LT(worst, 1e-9);
+}
+
 }  // namespace
 }  // namespace bsn::sim

@@ -93,6 +93,16 @@ TEST(ViewState, JointMessagesCarryTheNamedAnatomicalAngles) {
             std::string::npos)
       << *m;
   EXPECT_NE(m->find("\"anat\":[28.647889"), std::string::npos) << "flexion positive, degrees: " << *m;
+  // The next message of the joint leaves the (unchanged) names out; the snapshot and the message a second later
+  // have them.
+  const auto next = state.on_joint(j, 40 * kMs);
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->find("\"names\""), std::string::npos) << *next;
+  EXPECT_NE(next->find("\"anat\":[28.647889"), std::string::npos) << *next;
+  EXPECT_NE(state.snapshot().back().find("\"names\":[\"flexion_extension\""), std::string::npos);
+  const auto later = state.on_joint(j, 1100 * kMs);
+  ASSERT_TRUE(later);
+  EXPECT_NE(later->find("\"names\":[\"flexion_extension\""), std::string::npos) << *later;
 }
 
 TEST(ViewState, RotationAngleIsExactNearZeroAndAtHalfTurns) {
