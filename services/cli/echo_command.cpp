@@ -86,16 +86,22 @@ struct EstimateWatch {
   }
 };
 
-// One line per sample; an orientation line says which of the two orientation topics it comes from.
+// One line per sample; an orientation line says which of the orientation topics it comes from (the estimate, the
+// sensor's truth or the segment's truth; its flags say the frame).
+const char* orientation_label(std::string_view topic) {
+  if (topic == dds::kTruthOrientationTopic.name) return "truth";
+  if (topic == dds::kTruthSegmentOrientationTopic.name) return "segment-truth";
+  return "orientation";
+}
 std::string format_line(const bsn::Orientation& s, std::string_view topic) {
-  return format_sample(s, topic == dds::kTruthOrientationTopic.name ? "truth" : "orientation");
+  return format_sample(s, orientation_label(topic));
 }
 template <class T>
 std::string format_line(const T& s, std::string_view) {
   return format_sample(s);
 }
 std::string non_finite_line(const bsn::Orientation& s, std::string_view topic) {
-  return format_non_finite(s, topic == dds::kTruthOrientationTopic.name ? "truth" : "orientation");
+  return format_non_finite(s, orientation_label(topic));
 }
 std::string non_finite_line(const bsn::JointAngles& s, std::string_view) { return format_non_finite(s); }
 
