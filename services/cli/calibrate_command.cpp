@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,7 @@
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/io/json.hpp"
 #include "bsn/io/recording.hpp"
+#include "bsn/io/session_file.hpp"
 #include "calibration_client.hpp"
 #include "calibration_service.hpp"
 #include "tools.hpp"
@@ -360,15 +362,62 @@ int run_allan(const CalibrateOptions& opt) {
   return 0;
 }
 
+/// The bsn/raw streams of a session file as recordings, by node id (the sampling rate from the median interval).
+std::map<std::string, io::Recording> session_recordings(const std::string& path) {
+  const io::SessionReader r(path);
+  std::map<std::string, io::Recording> out;
+  for (const io::SessionStream& s : r.streams_of("bsn/raw")) {
+    io::Recording rec;
+    rec.timestamp_ns = r.read_u64(s, "timestamp_ns");
+    const std::size_t n = rec.timestamp_ns.size();
+    const auto acc = r.read_f64(s, "acc", 3), gyr = r.read_f64(s, "gyr", 3), mag = r.read_f64(s, "mag", 3);
+    const auto channels = r.read_u32(s, "channels");
+    if (acc.size() != 3 * n || gyr.size() != 3 * n || mag.size() != 3 * n || channels.size() != n)
+      throw io::IoError(path + ": the datasets of '" + s.group + "' differ in length");
+    rec.acc.resize(static_cast<Eigen::Index>(n), 3);
+    rec.gyr.resize(static_cast<Eigen::Index>(n), 3);
+    rec.mag.resize(static_cast<Eigen::Index>(n), 3);
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto row = static_cast<Eigen::Index>(k);
+      for (int c = 0; c < 3; ++c) {
+        rec.acc(row, c) = acc[3 * k + c];
+        rec.gyr(row, c) = gyr[3 * k + c];
+        rec.mag(row, c) = (channels[k] & 4u) ? mag[3 * k + c] : std::nan("");  // CHANNEL_MAG
+      }
+    }
+    std::vector<std::uint64_t> dt;
+    for (std::size_t k = 1; k < n; ++k)
+      if (rec.timestamp_ns[k] > rec.timestamp_ns[k - 1]) dt.push_back(rec.timestamp_ns[k] - rec.timestamp_ns[k - 1]);
+    if (dt.empty()) continue;
+    std::nth_element(dt.begin(), dt.begin() + static_cast<long>(dt.size() / 2), dt.end());
+    rec.sampling_rate_hz = 1e9 / static_cast<double>(dt[dt.size() / 2]);
+    out.emplace(s.key, std::move(rec));
+  }
+  return out;
+}
+
 /// `--alignment DIR`: the alignment of a recorded lab procedure (N-pose, flexions) from DIR/<node>.hdf5 per node of
 /// the body, as the calibration service would align it live; writes DIR/<node>.alignment.calib.yaml (or --output).
 int run_offline_alignment(const CalibrateOptions& opt) {
   namespace fs = std::filesystem;
   fusion::BodyModel body;
+  // A session file (bsn record) instead of a folder: its bsn/raw per node, its recorded body unless --body.
+  const bool from_file = fs::is_regular_file(opt.alignment) && io::is_session_file(opt.alignment);
+  std::map<std::string, io::Recording> from_session;
   try {
-    body = opt.live_options.body_path.empty() ? fusion::default_lower_body()
-                                              : config::load_body_model(opt.live_options.body_path);
+    if (from_file) from_session = session_recordings(opt.alignment);
+    if (!opt.live_options.body_path.empty()) {
+      body = config::load_body_model(opt.live_options.body_path);
+    } else if (from_file && io::SessionReader(opt.alignment).attributes().count("body_model")) {
+      body = config::parse_body_model(io::SessionReader(opt.alignment).attributes().at("body_model"),
+                                      opt.alignment + " (its body_model attribute)");
+    } else {
+      body = fusion::default_lower_body();
+    }
   } catch (const config::ConfigError& e) {
+    std::fprintf(stderr, "bsn calibrate: error: %s\n", e.what());
+    return 2;
+  } catch (const io::IoError& e) {
     std::fprintf(stderr, "bsn calibrate: error: %s\n", e.what());
     return 2;
   }
@@ -376,6 +425,18 @@ int run_offline_alignment(const CalibrateOptions& opt) {
   std::vector<calib::AlignmentNode> nodes = alignment_nodes(body, {}, problem);
   std::vector<io::Recording> recordings;
   for (const calib::AlignmentNode& n : nodes) {
+    if (from_file) {
+      const auto it = from_session.find(n.node);
+      if (it == from_session.end()) {
+        std::fprintf(stderr,
+                     "bsn calibrate: --alignment: %s has no bsn/raw samples of node '%s': the alignment needs every "
+                     "node of the body (--body for another body)\n",
+                     opt.alignment.c_str(), n.node.c_str());
+        return 2;
+      }
+      recordings.push_back(std::move(it->second));
+      continue;
+    }
     const std::string path = (fs::path(opt.alignment) / (n.node + ".hdf5")).string();
     if (!fs::exists(path)) {
       std::fprintf(stderr,
@@ -422,7 +483,9 @@ int run_offline_alignment(const CalibrateOptions& opt) {
     session.add(a.node, s, a.t);
   }
   const calib::AlignmentSessionResult r = session.finish(arrivals.back().t);
-  const std::string out_dir = opt.output.empty() ? opt.alignment : opt.output;
+  const std::string out_dir = !opt.output.empty() ? opt.output
+                              : from_file         ? fs::path(opt.alignment).parent_path().string()
+                                                  : opt.alignment;
   std::error_code ec;
   fs::create_directories(out_dir, ec);
   std::size_t aligned = 0;
@@ -483,8 +546,9 @@ Command calibrate_command() {
             cmd->add_option("--input", opt->input, "recording (CSV, BROAD HDF5) of still poses turned by hand");
             cmd->add_option("--allan", opt->allan, "static recording: print Allan noise figures instead");
             cmd->add_option("--alignment", opt->alignment,
-                            "folder of a recorded alignment (N-pose, flexions), DIR/<node>.hdf5 per node of the body: "
-                            "write DIR/<node>.alignment.calib.yaml (or into --output DIR) instead");
+                            "a recorded alignment (N-pose, flexions): a session file (bsn record) or a folder with "
+                            "DIR/<node>.hdf5 per node of the body: write <node>.alignment.calib.yaml beside it (or "
+                            "into --output DIR) instead");
             auto* field = cmd->add_option("--field-magnitude", opt->field_magnitude,
                                           "|calibrated magnetometer|, M (with --live: uT, default 50)")
                               ->capture_default_str()
@@ -515,7 +579,8 @@ Command calibrate_command() {
                             "(default: the 7-segment lower body; with --live, --node picks some of its nodes)");
             cmd->add_option(
                    "--pose", live.pose_s,
-                   "with --live --kind alignment: the N-pose at the start lasts at least S seconds (default 3)")
+                   "with --alignment or --live --kind alignment: the N-pose at the start lasts at least S seconds "
+                   "(default 3)")
                 ->check(non_negative_number(60.0));
             cmd->add_flag("--all-nodes", live.all_nodes, "with --live: every node publishing on bsn/raw");
             cmd->add_option("--duration", live.duration_s, "with --live: collect for S seconds (0: --samples only)")

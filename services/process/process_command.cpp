@@ -451,6 +451,7 @@ int process(const ProcessOptions& opt) {
   TopicOutput<bsn::JointAnglesPubSubType> joints(writer, dds::kJointAnglesTopic.name);
   TopicOutput<bsn::StatusPubSubType> status(writer, dds::kStatusTopic.name);
   TopicOutput<bsn::OrientationPubSubType> truth(writer, dds::kTruthOrientationTopic.name);
+  TopicOutput<bsn::RawSamplePubSubType> raw_out(writer, dds::kRawTopic.name);
   // Truth first, by segment: carried over as it was.
   std::map<std::string, std::size_t> truth_index;
   for (std::size_t i = 0; i < in.truth.size(); ++i) {
@@ -477,6 +478,7 @@ int process(const ProcessOptions& opt) {
     const std::size_t i = ev.index;
     bsn::RawSample& raw = raws[ev.track];
     fill_raw(t, i, raw);
+    if (opt.copy_raw) raw_out.write(ev.track, raw, t.arrival_ns[i]);
     if (e == 0) first_ns = t.arrival_ns[i];
     last_ns = std::max(last_ns, t.arrival_ns[i]);
     const fusion::SampleResult& r = pipeline.process(raw, t.timestamp_ns[i]);
@@ -561,6 +563,9 @@ Command process_command() {
                             "arrival (as the live fusion saw them; default for a session) or time (by sensor time; "
                             "default for a folder)");
             cmd->add_flag("--quiet", opt->quiet, "no progress bar");
+            cmd->add_flag("--raw", opt->copy_raw,
+                          "write the input's raw samples as bsn/raw too: a complete session, for bsn replay, bsn "
+                          "calibrate --alignment or bsn process again");
             return [opt] { return run_process(*opt); };
           }};
 }

@@ -23,7 +23,8 @@ struct ProcessOptions {
   /// arrival: the samples in the order they arrived at the recorder (the live fusion's order); time: by sensor
   /// time, a parent before its child at one instant. Default: arrival for a session, time for a folder.
   std::string order;
-  bool quiet = false;  ///< no progress bar
+  bool quiet = false;     ///< no progress bar
+  bool copy_raw = false;  ///< write the input's raw samples as bsn/raw too (a complete session: replay, alignment)
 };
 
 /// Returns the exit code: 0, 1 (a read or write failure) or 2 (a usage error: a bad option, body or input).

@@ -3,6 +3,7 @@
 // the same bytes; a folder of per-node recordings gives the simulator's motion; bad inputs are usage errors.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <numbers>
@@ -273,6 +274,44 @@ body:
                 {"eval", "--body", (dir() / "leg0.yaml").string(), (dir() / "lab0").string(), "--align-window", "5:1"}),
             2);
   EXPECT_NE(output("window").find("--align-window"), std::string::npos) << output("window");
+}
+
+TEST_F(Process, AlignmentFromASessionFileAppliedFromTheFirstSample) {
+  // The lab procedure simulated to per-node files, made a session (bsn process --raw), aligned from the session file
+  // (bsn calibrate --alignment SESSION.h5): the same rotations as from the folder. Then the session processed again
+  // with the alignment files: every orientation is in the segment frame from the first sample on.
+  const std::string scenario = std::string(BSN_SCENARIO_DIR) + "/gait_alignment.yaml";
+  ASSERT_EQ(run("sim", {"sim", "--scenario", scenario, "--out", (dir() / "lab").string()}), 0) << output("sim");
+  ASSERT_EQ(run("body", {"fusion", "--print-body"}), 0);
+  write_file(dir() / "body.yaml", output("body"));
+  const std::string body = (dir() / "body.yaml").string(), session = (dir() / "procedure.h5").string();
+  ASSERT_EQ(run("raw", {"process", (dir() / "lab").string(), "--body", body, "--raw", "--out", session}), 0)
+      << output("raw");
+  ASSERT_EQ(run("folder", {"calibrate", "--alignment", (dir() / "lab").string(), "--output", (dir() / "a").string()}),
+            0)
+      << output("folder");
+  ASSERT_EQ(run("session", {"calibrate", "--alignment", session, "--output", (dir() / "b").string()}), 0)
+      << output("session");
+  std::vector<std::string> files;
+  for (const char* n : {"pelvis", "thigh_l", "shank_l", "foot_l", "thigh_r", "shank_r", "foot_r"}) {
+    const std::string name = std::string(n) + ".alignment.calib.yaml";
+    EXPECT_EQ(read_file(dir() / "a" / name), read_file(dir() / "b" / name)) << name;
+    EXPECT_NE(read_file(dir() / "b" / name).find("sensor_to_segment"), std::string::npos) << name;
+    files.push_back((dir() / "b" / name).string());
+  }
+  std::vector<std::string> args{"process", session, "--out", (dir() / "aligned.h5").string()};
+  for (const std::string& f : files) args.insert(args.end(), {"--calibration", f});
+  ASSERT_EQ(run("aligned", args), 0) << output("aligned");
+  EXPECT_NE(output("aligned").find("7 calibrations applied from the first sample"), std::string::npos)
+      << output("aligned");
+  const io::SessionReader r((dir() / "aligned.h5").string());
+  ASSERT_EQ(r.streams_of("bsn/orientation").size(), 7u);
+  for (const auto& s : r.streams_of("bsn/orientation")) {
+    const auto flags = r.read_u32(s, "flags");
+    ASSERT_EQ(flags.size(), 6000u) << s.key;
+    EXPECT_EQ(std::count_if(flags.begin(), flags.end(), [](std::uint32_t f) { return (f & 32u) == 0; }), 0)
+        << s.key << ": an orientation not in the segment frame (FLAG_SEGMENT_FRAME)";
+  }
 }
 
 TEST_F(Process, BadInputsAreUsageErrors) {
