@@ -73,7 +73,10 @@ int run_view(const ViewOptions& opt) {
   server_options.port = opt.port;
   server_options.assets = view_assets();
   server_options.token = opt.token;
-  if (opt.token.empty() && opt.bind.rfind("127.", 0) != 0 && opt.bind != "::1" && opt.bind != "localhost")
+  const bool loopback = opt.bind.rfind("127.", 0) == 0 || opt.bind == "::1" || opt.bind == "localhost";
+  // On loopback every browser has the same address: only the total limit applies.
+  if (loopback) server_options.max_websockets_per_client = server_options.max_websockets;
+  if (opt.token.empty() && !loopback)
     logging::log_warn("listening on ", opt.bind, " without --token: anyone who reaches this address sees the body ",
                       "live (health data); give --token (or BSN_VIEW_TOKEN) to require one");
   server_options.snapshot = [&] {

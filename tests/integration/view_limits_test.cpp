@@ -112,7 +112,8 @@ class ViewLimits : public ProcessTest {
 };
 
 TEST_F(ViewLimits, PageAndLiveViewStayReachableUnderIdleWebSocketsAndUnfinishedRequests) {
-  const int port = start_view(test_domain(80));
+  // Listening on every interface, as for a lab: the per-address limit applies (on loopback only the total does).
+  const int port = start_view(test_domain(80), {"--bind", "0.0.0.0"});
   ASSERT_GT(port, 0) << tail(log_path("view"));
   const char* kAttacker = "127.0.0.2";
   const char* kBrowser = "127.0.0.1";
