@@ -26,7 +26,7 @@ class CalibrationService {
  public:
   struct Options {
     std::string store_dir;            ///< "" = default_calibration_store()
-    double progress_period_s = 0.25;  ///< progress of each running request this often (the issue asks >= 2 Hz), s
+    double progress_period_s = 0.25;  ///< progress of each running request this often (>= 2 Hz for a person), s
     /// A request for node "*" takes every node heard on bsn/raw within this long, s.
     double active_node_window_s = 1.0;
   };

@@ -88,8 +88,9 @@ const std::map<std::string, std::string>& examples() {
        "  bsn ros2-bridge                            rt/bsn/<segment>/imu, rt/tf, rt/bsn/joint_states for ROS 2 tools\n"
        "  bsn ros2-bridge --domain 0                 ROS 2's default domain (ROS_DOMAIN_ID=0)"},
       {"session",
-       "  bsn session sessions/lower_body_sim.yaml   the simulated lower body: align, record trials/walk.h5, export\n"
-       "Session files: sessions/*.yaml; bodies: bodies/*.yaml."},
+       "  bsn session deploy/sessions/lower_body_sim.yaml   the simulated lower body: align, record trials/walk.h5, "
+       "export\n"
+       "Session files: deploy/sessions/*.yaml; bodies: deploy/bodies/*.yaml."},
       {"tune",
        "  bsn sim --scenario sim_publishers/scenarios/nez_slow.yaml --out slow/\n"
        "  bsn tune --filter mekf slow/imu.hdf5 --max-evaluations 60\n"

@@ -315,7 +315,7 @@ class FolderReaper {
   int write_fd_ = -1;
 };
 
-/// The shipped body file `name` (bodies/NAME in the repository, share/bsn/bodies/NAME when installed, or
+/// The shipped body file `name` (deploy/bodies/NAME in the repository, share/bsn/bodies/NAME when installed, or
 /// $BSN_BODIES_DIR/NAME), or "" if none of them has it.
 std::string shipped_body_file(const std::string& name) {
   std::vector<std::filesystem::path> dirs;
@@ -335,7 +335,7 @@ int run_demo(const DemoOptions& opt) {
   // moves as one; the calibration service aligns the sensors first. A body file of the user's (or --random) gives
   // each node its own random motion on the default mounting.
   const bool walking = opt.body_path.empty() && !opt.random;
-  // The walking body is the shipped lower body a lab starts from (bodies/lower_body.yaml): its knees and ankles,
+  // The walking body is the shipped lower body a lab starts from (deploy/bodies/lower_body.yaml): its knees and ankles,
   // hinge-like, take the heading between their two segments from the hinge constraint (heading: kinematic) once
   // aligned; measured on this demo, the largest error of any of the three angles after the alignment went from
   // 5.2 deg (left ankle's axial rotation, the two filters' heading difference) to 1.0 deg, and from 2.3 to 1.3 deg at

@@ -328,7 +328,7 @@ SessionSpec load_session(const std::string& path) {
   const fs::path base = fs::absolute(path).parent_path();
   SessionSpec s;
   s.name = root["name"] ? r.text(root["name"], "name") : fs::path(path).stem().string();
-  if (!root["body"]) r.fail_at(1, "the session needs body: FILE (e.g. bodies/lower_body.yaml)");
+  if (!root["body"]) r.fail_at(1, "the session needs body: FILE (e.g. deploy/bodies/lower_body.yaml)");
   s.body_path = absolute_from(base, r.text(root["body"], "body"));
   // Inputs are relative to the session file; what the session writes (calibrations, trials) to the working folder.
   const fs::path here = fs::current_path();
@@ -421,7 +421,7 @@ Command session_command() {
           [](CLI::App* cmd) {
             auto file = std::make_shared<std::string>();
             auto domain = std::make_shared<int>(0);
-            cmd->add_option("file", *file, "session file (YAML; see README, sessions/)")->required();
+            cmd->add_option("file", *file, "session file (YAML; see README, deploy/sessions/)")->required();
             add_domain_option(cmd, *domain);
             return [file, domain] {
               logging::set_log_identity("session");

@@ -1,4 +1,4 @@
-// Calibration service latency (issue 10): from the last collected sample written on bsn/raw to the result's
+// Calibration service latency: from the last collected sample written on bsn/raw to the result's
 // arrival on bsn/calibration/result, through a real `bsn calibration` process, for the 30-pose Table I session
 // at 100 Hz (22 500 samples). Target <= 50 ms. Prints every run and the median.
 //   ./build/tests/bench/bsn_bench_calibration_service [--runs N] [--domain D]

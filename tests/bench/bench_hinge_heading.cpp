@@ -1,4 +1,4 @@
-// Cost of the kinematic-constraint heading of a hinge joint (issue 13 item 6): one estimator update plus the
+// Cost of the kinematic-constraint heading of a hinge joint: one estimator update plus the
 // correction of the child (ns per joint sample), and a knee's whole BodyFusion step (the thigh's and the shank's
 // samples through gate, filter and joint) in the plain and the kinematic mode.
 // Run: ./build/tests/bench/bsn_bench_hinge_heading --benchmark_repetitions=5 --benchmark_report_aggregates_only=true

@@ -1,4 +1,4 @@
-// `bsn tune`'s speed and the seed's reproduction (issue 17):
+// `bsn tune`'s speed and the seed's reproduction:
 //  - time to identify the MEKF's four sigmas on a 10-minute 128 Hz recording (the simulator's nez_intermediate
 //    scenario) with the default budget on two worker threads; target < 60 s (Nez's exhaustive step 1: 9 days);
 //  - with --all: the three Nez scenarios each identified on their own, printed beside Nez Table 3, with the error of

@@ -19,8 +19,8 @@ constexpr double kDeg = 180.0 / std::numbers::pi;
 
 // Mean total RMSE bar per filter, degrees: the figure measured with `bsn eval ../shared/data/broad --filter NAME`
 // plus 10 %, so a regression of accuracy fails here. A new filter must get its bar.
-// Measured 2026-12-02 with the defaults after issue 12's shared detector (mean total / inclination RMSE, deg; before
-// it in brackets).
+// Measured 2026-12-02 with the defaults after the shared disturbance detector (mean total / inclination RMSE, deg;
+// before it in brackets).
 const std::map<std::string, double> kMeanTotalRmseBarDeg = {
     {"complementary", 3.00},  // 2.73 / 1.04 (13.09 / 9.64 before its rest bias low-pass and tilt clip; 3.97 / 1.73
                               // before the accelerometer was never skipped and the shared detector came in)
@@ -99,7 +99,7 @@ TEST(BroadFilters, EveryFilterRunsEveryTrialUnderItsBar) {
   EXPECT_LT(best->mean_rmse.inclination * kDeg, kBestInclinationBarDeg);
 }
 
-// Issue 12's rule against heading collapse: no filter's total RMSE on any trial exceeds 3x its mean over the eight.
+// The rule against heading collapse: no filter's total RMSE on any trial exceeds 3x its mean over the eight.
 // One known miss, reported as a skip with its figure: seel_ruppin on trial 27 (the phone lying on the sensor), 6.69
 // against 2.07 deg (3.2x). The phone adds a sensor-fixed field of about 2 uT that the IMU's calibration does not know;
 // |m| and the dip change by 1-2 %, so the magnetometer itself points 4-7 deg off north, and every 9D filter follows

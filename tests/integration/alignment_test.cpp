@@ -174,7 +174,7 @@ TEST_F(Alignment, TheServiceAlignsALegAndFusionAppliesItLive) {
       // bsn/orientation now reports the segment frame.
       EXPECT_TRUE(seen.orientation_flags[node] & bsn::FLAG_SEGMENT_FRAME);
     }
-    // The bounds for simulated gait after the alignment: knee flexion < 2 deg RMS, ankle dorsiflexion
+    // The bounds for simulated gait after the alignment: knee flexion < 2 deg RMS, ankle dorsiflexion
     // < 3 deg (what a lab accepts against optical motion capture); before it, the random mountings put the angles
     // tens of degrees off (10 deg is far below what a random rotation gives and far above the filters' error).
     const JointErrors& knee = seen.joints["knee_l"];

@@ -46,7 +46,7 @@ Mat3 transform_of(const bsn::CalibrationResult& r) {
   h << t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8];
   return h;
 }
-// The bounds (Table I with the simulated gyro): |B - B_true| / |B_true| <= 0.01 %, every element of H
+// The bounds (Table I with the simulated gyro): |B - B_true| / |B_true| <= 0.01 %, every element of H
 // within 0.2 % of |H_true|.
 double bias_error(const Vec3& b, const Truth& t) { return (b - t.b).norm() / t.b.norm(); }
 double transform_error(const Mat3& h, const Truth& t) { return (h - t.h).cwiseAbs().maxCoeff() / t.h.norm(); }

@@ -48,7 +48,7 @@ TEST_F(CliUsage, NoGuessForAWordFarFromEveryName) {
 
   EXPECT_EQ(run("none", {}), 2);
   EXPECT_NE(output("none").find("A subcommand is required"), std::string::npos) << output("none");
-  // Issue 16, item 6: the message says which commands there are, also after an unknown option alone.
+  // The message says which commands there are, also after an unknown option alone.
   EXPECT_NE(output("none").find("(one of: sim, fusion"), std::string::npos) << output("none");
   EXPECT_EQ(run("option_only", {"-x"}), 2);
   EXPECT_NE(output("option_only").find("(one of: sim, fusion"), std::string::npos) << output("option_only");
@@ -60,7 +60,7 @@ TEST_F(CliUsage, NoGuessForAWordFarFromEveryName) {
 
 TEST_F(CliUsage, AbsurdNumbersAreRefusedAtParseTimeNamingTheOption) {
   // Every numeric option of every command: negative, zero where it must be positive, not finite, or beyond any
-  // sensible value (issue 16, item 5). Exit 2 before anything runs, with the option in the message.
+  // sensible value. Exit 2 before anything runs, with the option in the message.
   const std::string domain = std::to_string(test_domain(26));
   const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
       {{"fusion", "--stale-timeout", "-1"}, "--stale-timeout"},
@@ -96,7 +96,7 @@ TEST_F(CliUsage, AbsurdNumbersAreRefusedAtParseTimeNamingTheOption) {
 }
 
 TEST_F(CliUsage, ADirectoryGivenAsAFileIsNamedSo) {
-  // Issue 16, item 6: a directory used to be reported as "the file is empty".
+  // A directory used to be reported as "the file is empty".
   std::filesystem::create_directories(dir() / "adir");
   EXPECT_EQ(run("body", {"fusion", "--body", (dir() / "adir").string(), "--domain", std::to_string(test_domain(26))}),
             2);

@@ -69,10 +69,10 @@ TEST_F(DemoCommand, Demo) {
       << "no joint shown with the aligned mounting";
   // After the alignment, while walking, the walking body's first angles in the ranges of normal gait (knee 0..65, hip
   // -20..35, ankle -20..15 deg), with 5 deg for the filters' largest momentary errors, and within 3 deg rms of the
-  // simulator's truth (the issue's bound; the filters reach 1-2 deg on this motion).
+  // simulator's truth (what a lab accepts; the filters reach 1-2 deg on this motion).
   const std::map<std::string, std::pair<double, double>> ranges{
       {"hip", {-20, 35}}, {"knee", {0, 65}}, {"ankle", {-20, 15}}};
-  // The error column (the largest of the three angles' errors at each instant) is within 3 deg rms too: the issue asks
+  // The error column (the largest of the three angles' errors at each instant) is within 3 deg rms too: a lab asks
   // it of the live column, and the knees' and ankles' axial rotation, the hardest angle, follows the heading
   // difference of two filters, which the demo's kinematic heading takes from the hinge.
   const std::regex joint_summary(

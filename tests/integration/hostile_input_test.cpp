@@ -44,7 +44,7 @@ struct StatusLog {
 
 TEST_F(HostileInput, ForeignWriterWithANodeIdTooLongForTheGeneratedKeyCode) {
   // Cyclone DDS sends node ids of 300 characters: the IDL's `string` is unbounded, fastddsgen's key code holds 255.
-  // bsn fusion and bsn echo aborted on the first such sample (issue 16, item 1); now both keep running and the
+  // bsn fusion and bsn echo aborted on the first such sample; now both keep running and the
   // fusion reports the samples as an unknown node.
   const int kDomain = test_domain(49);
   const std::string domain = std::to_string(kDomain);
@@ -92,7 +92,7 @@ TEST_F(HostileInput, ForeignWriterWithANodeIdTooLongForTheGeneratedKeyCode) {
 }
 
 TEST_F(HostileInput, IdsFromTheNetworkArePrintedEscaped) {
-  // A node id that clears the screen and forges a log line (issue 16, item 8) reaches the log and bsn echo as
+  // A node id that clears the screen and forges a log line reaches the log and bsn echo as
   // visible escapes.
   const int kDomain = test_domain(53);
   const std::string domain = std::to_string(kDomain);
@@ -207,7 +207,7 @@ TEST_F(HostileInput, SamplesBeyondTheInstanceLimitAreCounted) {
 }
 
 TEST_F(HostileInput, TwoFusionServicesOnOneDomainNoticeEachOther) {
-  // Both would publish every orientation and joint angle under the same keys (issue 16, item 9): each warns and
+  // Both would publish every orientation and joint angle under the same keys: each warns and
   // lists the other's process id on its own bsn/status.
   const int kDomain = test_domain(51);
   const std::string domain = std::to_string(kDomain);
@@ -239,7 +239,7 @@ TEST_F(HostileInput, TwoFusionServicesOnOneDomainNoticeEachOther) {
 }
 
 TEST_F(HostileInput, DemoKilledWithSigkillLeavesNoFolder) {
-  // SIGKILL gives the demo no chance to clean up; its reaper removes the log folder (issue 16, item 7).
+  // SIGKILL gives the demo no chance to clean up; its reaper removes the log folder.
   const int kDomain = test_domain(52);
   const std::filesystem::path tmp = dir() / "tmp";
   std::filesystem::create_directories(tmp);

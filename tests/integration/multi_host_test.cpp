@@ -348,7 +348,7 @@ TEST_F(MultiHost, LinkCutIsAGapNotAClockReset) {
   }
 }
 
-// Unsecured, a rogue host runs `bsn sim --node thigh_l` while the real thigh_l flows (the issue: 0 rejected, and
+// Unsecured, a rogue host runs `bsn sim --node thigh_l` while the real thigh_l flows (before the check: 0 rejected, and
 // thigh_l's error went from 0.3 deg to 10-35 deg). Its samples are rejected as conflicting_source, the real
 // thigh_l's estimate stays within 2 deg of the real simulator's truth, and no other node is touched.
 TEST_F(MultiHost, RogueSimIsAConflictingSource) {
@@ -425,7 +425,7 @@ TEST_F(MultiHost, RogueSimIsAConflictingSource) {
   std::printf("[ measure  ] thigh_l max error %.3f deg before the rogue (%d compared), %.3f deg with it (%d)\n",
               max_error_before_deg, compared_before, max_error_deg, compared);
   EXPECT_GE(compared, 200) << "too few estimates matched to the truth with the rogue running";
-  // The real sensor's estimate is as good as without the rogue (0.3 deg in the issue); 2 deg is the issue's bound.
+  // The real sensor's estimate is as good as without the rogue (0.3 deg measured); 2 deg is what a lab accepts.
   EXPECT_LT(max_error_deg, 2.0) << "thigh_l's estimate follows the rogue's samples";
   // 8 s of a 100 Hz rogue; half of it leaves room for a loaded machine and the status period.
   EXPECT_GE(conflicting["thigh_l"], 400u) << "the rogue's samples are not all rejected as conflicting_source";

@@ -84,7 +84,7 @@ TEST_F(SampleSources, SecondSimOfANodeIsRejectedThenTakesOverAfterTheFirstStops)
   ASSERT_FALSE(second.empty()) << tail(log_path("second"));
   ASSERT_NE(first, second);
 
-  // Two full rate windows later: the node's rate is one sender's (100 Hz), not both (the issue saw 200 Hz). The
+  // Two full rate windows later: the node's rate is one sender's (100 Hz), not both (200 Hz before the fix). The
   // bounds leave room for a loaded machine; the doubled rate is far outside them.
   const std::uint64_t conflicts_before = watch.rejected("conflicting_source");
   std::this_thread::sleep_for(2500ms);

@@ -19,7 +19,7 @@ TEST_F(ProcessTest, SessionAlignsRecordsExportsAndStopsEverything) {
   // The shipped session file, run from this test's folder (where it writes calib/ and trials/).
   auto& session = spawn_command("session", {"/bin/sh", "-c",
                                             "cd '" + dir().string() + "' && exec '" + bsn_executable() + "' session '" +
-                                                (kRepository / "sessions/lower_body_sim.yaml").string() +
+                                                (kRepository / "deploy/sessions/lower_body_sim.yaml").string() +
                                                 "' --domain " + std::to_string(domain) + " < /dev/null"});
   const auto status = session.wait_for(150s);
   ASSERT_TRUE(exited_cleanly(status)) << describe_status(status) << "\n" << tail(log_path("session"), 60);
@@ -56,7 +56,7 @@ TEST_F(ProcessTest, SessionAlignsRecordsExportsAndStopsEverything) {
 }
 
 TEST_F(ProcessTest, ABadSessionFileStopsBeforeAnythingRunsNamingItsLine) {
-  const std::string body = (kRepository / "bodies/lower_body.yaml").string();
+  const std::string body = (kRepository / "deploy/bodies/lower_body.yaml").string();
   const std::string scenario = (kRepository / "sim_publishers/scenarios/gait_alignment.yaml").string();
   const std::string good = "body: " + body + "\nnodes:\n  simulated: {scenario: " + scenario +
                            "}\nrecord: {out: " + (dir() / "trials").string() + ", duration_s: 5}\n";

@@ -77,7 +77,7 @@ TEST(AllanDeviation, BadInputGivesAnEmptyCurveAndZeroCoefficients) {
 namespace bsn::calib {
 namespace {
 
-// Issue 17, item 4: a 30-minute static recording (sim_publishers/scenarios/allan_static_30min.yaml) with a 50 Hz
+// A 30-minute static recording (sim_publishers/scenarios/allan_static_30min.yaml) with a 50 Hz
 // magnetometer beside the 100 Hz IMU. Each channel, taken at its own rate from its own timestamps, gives the white
 // noise density it has within 10 % (the scatter of an Allan estimate at tau = 1 s over 30 min is about
 // 1 / sqrt(number of 1 s clusters) = 2.4 %; quantisation adds up to 1.5 % on the gyro). The configured density is

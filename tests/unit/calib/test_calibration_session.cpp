@@ -68,7 +68,7 @@ TEST(CalibrationSession, FitsExactlyAsTheOfflineCalibrationOfTheSameSamples) {
   EXPECT_LT((live.field.calibration.bias - offline.calibration.bias).norm(), 1e-9 * offline.calibration.bias.norm());
   EXPECT_LT(max_relative(live.field.calibration.transform, offline.calibration.transform), 1e-9);
   EXPECT_EQ(live.field.quality.pose_count, 20u);
-  // And the truth, within the bounds (bias 0.01 %, H 0.2 %) with an exact gyro.
+  // And the truth, within the bounds (bias 0.01 %, H 0.2 %) with an exact gyro.
   const auto truth = testing::paper_sensor();
   EXPECT_LT((live.field.calibration.bias - truth.bias).norm() / truth.bias.norm(), 1e-4);
   EXPECT_LT(max_relative(live.field.calibration.transform, truth.transform), 2e-3);

@@ -130,7 +130,7 @@ TEST(SegmentAlignment, GaitAnglesFollowTheTruthAfterTheAlignmentOnly) {
   }
   const double walk_from = spec.gait->alignment->walk_start_s();
   const auto aligned = joint_rmse(rec, body, walk_from);
-  // Bounds of the issue: knee flexion < 2 deg, hip flexion and adduction < 3 deg, ankle dorsiflexion < 3 deg. They
+  // Bounds: knee flexion < 2 deg, hip flexion and adduction < 3 deg, ankle dorsiflexion < 3 deg. They
   // are what a lab accepts against optical motion capture (Seel et al. 2014 reach 1-3 deg for the knee and ankle).
   for (const char* side : {"_l", "_r"}) {
     SCOPED_TRACE(side);

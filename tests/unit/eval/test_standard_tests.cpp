@@ -63,7 +63,7 @@ TEST(StandardTests, FiltersThatRejectTheMagnetometerCatchTheDisturbancesOfBCAndE
         EXPECT_GE(r.caught_fraction, 0.8) << r.filter << " in test " << r.test << ", seed " << seed_name;
       }
       if (r.test == "A") {
-        // A is a clean field with motion: the magnetometer must be kept (issue 12: >= 95 % accepted in a clean
+        // A is a clean field with motion: the magnetometer must be kept (>= 95 % accepted in a clean
         // field in motion).
         EXPECT_LE(r.mag_rejected_fraction, 0.05) << r.filter << " in test A, seed " << seed_name;
       }

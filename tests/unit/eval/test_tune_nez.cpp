@@ -1,4 +1,4 @@
-// Nez et al. 2018 reproduced on the simulator (issue 17): the MEKF's four sigmas identified on each of the three
+// Nez et al. 2018 reproduced on the simulator: the MEKF's four sigmas identified on each of the three
 // 10-minute Nez scenarios (Opal-like sensor, 128 Hz), and the fast one again with a magnetometer that lags the gyro.
 // Labelled slow (about a minute on two free cores).
 #include <gtest/gtest.h>

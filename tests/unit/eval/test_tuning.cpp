@@ -126,7 +126,7 @@ TuneRecording nez_recording(const std::string& scenario, double seconds) {
 }
 
 // The optimiser against the exhaustive grid at the same resolution (Nez's method, 9 log-spaced values per
-// parameter here): it must land within 5 % of the grid's optimum (issue 17), with fewer evaluations.
+// parameter here): it must land within 5 % of the grid's optimum, with fewer evaluations.
 TEST(Optimiser, WithinFivePercentOfTheExhaustiveGridOnSimulatedRecordings) {
   const TuneRecording slow = nez_recording("nez_slow", 40.0);
   const TuneRecording inter = nez_recording("nez_intermediate", 40.0);

@@ -1,4 +1,4 @@
-// Simulated regression cases of issue 12: a clean (undisturbed) earth field, a consumer MEMS sensor whose
+// Simulated regression cases: a clean (undisturbed) earth field, a consumer MEMS sensor whose
 // magnetometer is calibrated (no hard or soft iron left) but whose gyro has its scale and misalignment errors, and
 // whose magnetometer lags the gyro by one sample and has its own bandwidth. Two kinds of motion that made filters
 // reject a clean field, or lose the heading, on real recordings:
@@ -199,9 +199,9 @@ TEST_P(CleanFieldMotion, FastRotationKeepsTheMagnetometer) {
 }
 
 // The heading error is BROAD's (the heading part of the error quaternion), RMS over the scored samples as every
-// figure of the issue; its worst single sample is reported. Accelerations of 1 g tilt every filter's inclination by
+// target figure; its worst single sample is reported. Accelerations of 1 g tilt every filter's inclination by
 // several degrees for tenths of a second, which leaks into the heading through the horizontal projection of the
-// field; 2 deg RMS is what the issue asks (the failure it fixes is heading collapse: 150 deg).
+// field; 2 deg RMS is the target (the failure it fixes is heading collapse: 150 deg).
 TEST_P(CleanFieldMotion, TranslationKeepsTheHeading) {
   const RunFigures f = run(GetParam(), translation());
   ASSERT_GT(f.max_external_acc, 0.8 * kGravity);  // accelerations near 1 g, as the case claims

@@ -353,7 +353,7 @@ TEST_P(FilterContract, TracksANoisyRotationWithFullAndQuarterRateMagnetometer) {
   }
 }
 
-// A sensor that changes its rate (a firmware setting, a USB hiccup) must not leave a filter wrong (issue 16, item 4):
+// A sensor that changes its rate (a firmware setting, a USB hiccup) must not leave a filter wrong:
 // nothing physical changes when a still sensor goes 100 Hz -> 10 kHz for 5 s -> 100 Hz, so every coefficient that
 // depends on dt (gains, low-pass designs) must follow it. The sensor is still, tilted, with white noise of
 // TurningNoise per sample and no gyro bias (6D filters would drift in heading with one, whatever the rate); the

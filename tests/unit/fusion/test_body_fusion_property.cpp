@@ -1,4 +1,4 @@
-// Property of the sample gate and BodyFusion (issue 16): for any interleaving of good and hostile samples,
+// Property of the sample gate and BodyFusion: for any interleaving of good and hostile samples,
 // received = accepted + rejected (per reason), `missing` never exceeds the samples really lost nor the sequence
 // span seen, and every output is a finite unit quaternion. Seeded: each trial's stream is reproducible from its
 // seed, printed on failure.

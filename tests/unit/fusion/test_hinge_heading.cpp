@@ -266,7 +266,7 @@ void print(const char* what, const KneeRun& r) {
             << " deg; observability " << r.mean_observability << " (" << r.samples << " samples)\n";
 }
 
-// Bounds: the 3 deg for knee flexion and adduction in the disturbed area (what a lab accepts against optical
+// Bounds: 3 deg for knee flexion and adduction in the disturbed area (what a lab accepts against optical
 // motion capture). The correction removes only the relative heading, so what remains is each filter's inclination
 // error in gait (about 1 deg with consumer MEMS), which the plain mode has too. The plain mode's knee error is the
 // heading difference of the two segments, seen mostly as axial rotation while the knee is near straight and partly

@@ -1,7 +1,7 @@
 // A plain complementary filter: strapdown gyro integration, a tilt correction towards the accelerometer
 // and a heading-only correction towards the horizontal magnetic field, each a first-order low-pass with
 // an interpretable time constant. It is the reference the seed filters must beat. Two additions keep it usable with
-// a consumer gyro in human motion (issue 12), each with a switch back to the plain filter: the gyro bias is learned
+// a consumer gyro in human motion, each with a switch back to the plain filter: the gyro bias is learned
 // at rest only (Fan et al.'s low-pass, GyroBiasLowPass; no bias estimation in motion), and one tilt correction acts
 // on at most max_acc_error_rad of the angle to the accelerometer's up (as seel_ruppin's clip). The magnetometer is
 // judged by the shared MagDisturbanceDetector (|m| and dip, with its rules for a lagging magnetometer and for a long

@@ -12,7 +12,7 @@
 //     follow the low-passed field while it is clean, as a running mean over the first mag_reference_tau_s and an
 //     exponential one afterwards (VQF's magRefTau): one reading's noise does not stay in every later decision.
 // Three rules keep a clean field in motion from looking disturbed, and a long disturbance from costing the heading
-// (issue 12; the last two after VQF):
+// (the last two after VQF):
 //   - rate tolerance: a magnetometer reading lags the gyro (it is sampled before it, or averages over its own
 //     bandwidth), so while the sensor turns at |w| the field it reports is the field of an orientation |w| * latency
 //     ago (one sample, plus its own averaging delay) and its dip, seen with the current vertical, is off by up to |w| *
