@@ -28,6 +28,7 @@
 #include "fusion_pipeline.hpp"
 #include "progress_bar.hpp"
 #include "sample_fields.hpp"
+#include "session_columns.hpp"
 
 #ifndef BSN_VERSION
 #define BSN_VERSION "unknown"
@@ -202,44 +203,6 @@ void read_folder(const std::string& dir, ProcessInput& in, const fusion::BodyMod
 }
 
 // ---- Output ------------------------------------------------------------------------------------------------------
-
-// Columns every stream has, before the type's own fields: the layout `bsn record` writes.
-enum : std::size_t { kArrivalColumn, kCdrColumn, kCdrEndColumn, kFirstFieldColumn };
-
-class ColumnSpecVisitor : public FieldVisitor {
- public:
-  std::vector<io::ColumnSpec> specs{{"arrival_ns", io::ColumnType::kU64, 1, "ns since 1970 (UTC), recorder clock"},
-                                    {"cdr", io::ColumnType::kU8, 1, "XCDR1 serialised samples, concatenated"},
-                                    {"cdr_end", io::ColumnType::kU64, 1, "end offset of each sample in cdr"}};
-  void key(const char*, const std::string&) override {}
-  void text(const char*, const std::string&) override {}
-  void u64(const char* name, const char* unit, std::uint64_t) override {
-    specs.push_back({name, io::ColumnType::kU64, 1, unit});
-  }
-  void u32(const char* name, const char* unit, std::uint32_t) override {
-    specs.push_back({name, io::ColumnType::kU32, 1, unit});
-  }
-  void f64(const char* name, const char* unit, const double*, int n) override {
-    specs.push_back({name, io::ColumnType::kF64, n, unit});
-  }
-};
-
-class AppendVisitor : public FieldVisitor {
- public:
-  AppendVisitor(io::SessionWriter& w, std::size_t stream) : writer_(w), stream_(stream) {}
-  void key(const char*, const std::string&) override {}
-  void text(const char*, const std::string&) override {}
-  void u64(const char*, const char*, std::uint64_t value) override { writer_.append(stream_, column_++, &value, 1); }
-  void u32(const char*, const char*, std::uint32_t value) override { writer_.append(stream_, column_++, &value, 1); }
-  void f64(const char*, const char*, const double* values, int) override {
-    writer_.append(stream_, column_++, values, 1);
-  }
-
- private:
-  io::SessionWriter& writer_;
-  std::size_t stream_;
-  std::size_t column_ = kFirstFieldColumn;
-};
 
 /// The streams of one topic in the output, one per key, created on their first sample.
 template <class PubSub>

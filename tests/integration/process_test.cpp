@@ -165,9 +165,12 @@ TEST_F(Process, AFolderOfRecordingsIsDeterministicAndExportable) {
   ASSERT_EQ(r.streams_of("bsn/status").size(), 1u);
   // bsn export reads it as it reads a live session.
   ASSERT_EQ(run("export", {"export", a, "--format", "csv", "--out", (dir() / "csv").string()}), 0) << output("export");
-  const std::string csv = read_file(dir() / "csv" / "joint_angles.csv");
-  EXPECT_NE(csv.find("knee_l"), std::string::npos);
-  EXPECT_GT(std::count(csv.begin(), csv.end(), '\n'), 2400);
+  // One CSV file per joint (its columns carry the joint's own angle names), each with all 1200 of its samples.
+  for (const std::string joint : {"hip_l", "knee_l"}) {
+    const std::string csv = read_file(dir() / "csv" / ("joint_angles_" + joint + ".csv"));
+    EXPECT_NE(csv.find(joint), std::string::npos) << joint;
+    EXPECT_GT(std::count(csv.begin(), csv.end(), '\n'), 1200) << joint;
+  }
   // The other filter: different numbers, same layout.
   ASSERT_EQ(run("ekf", {"process", (dir() / "lab").string(), "--body", body, "--filter", "ekf", "--out",
                         (dir() / "ekf.h5").string()}),

@@ -57,6 +57,7 @@ const std::vector<Expectation>& expectations() {
       {"gait_lower_body", "foot_l", {5, 40}, {21, 23}},
       {"gait_lower_body", "thigh_l", {5, 21, 23}, {}},
       {"gait_alignment", "foot_r", {1, 10, 40}, {}},
+      {"gait_session", "foot_r", {1, 10, 40, 100}, {}},
       {"reach_upper_body", "hand_r", {}, {1, 30}},
       {"reach_upper_body", "hand_l", {1, 30}, {}},
       {"hinge_chain_disturbed", "base", {1, 30, 59}, {}},
@@ -83,7 +84,7 @@ TEST(SimScenarios, EveryShippedScenarioLoadsAndIsChecked) {
     EXPECT_NO_THROW(ScenarioRunner(spec, {}, false)) << stem;
     EXPECT_TRUE(checked.count(stem)) << stem << " has no disturbance expectations in this test";
   }
-  EXPECT_EQ(files, 18);
+  EXPECT_EQ(files, 19);
 }
 
 TEST(SimScenarios, DisturbancesShowWhereTheScenarioPutsThem) {
