@@ -59,7 +59,10 @@ class Recorder {
  public:
   explicit Recorder(io::SessionWriter& writer) : writer_(writer) {}
 
+  // Under the lock: the readers made before this one already deliver samples on DDS threads, and a growing
+  // vector moves the topics they write to.
   std::size_t add_topic(const std::string& name) {
+    std::lock_guard lock(mutex_);
     topics_.push_back({name, 0, {}});
     return topics_.size() - 1;
   }
