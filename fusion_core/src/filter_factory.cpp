@@ -13,19 +13,19 @@
 namespace bsn::fusion {
 namespace {
 
-// The registry: one line per filter (name, 6D-only, maker). Each filter's header declares its make_* function.
+// The registry: one line per filter (name, capabilities, maker). Each filter's header declares its make_* function.
 constexpr FilterInfo kFilters[] = {
-    {"complementary", false, &make_complementary_filter},
-    {"dlkf", false, &make_dlkf_filter},
-    {"ekf", false, &make_ekf_filter},
-    {"mekf", false, &make_mekf_filter},
-    {"mekf_adaptive", false, &make_mekf_adaptive_filter},
-    {"seel_ruppin", false, &make_seel_ruppin_filter},
-    {"seel_ruppin6", true, &make_seel_ruppin6_filter},
-    {"madgwick", false, &make_madgwick_filter},
-    {"madgwick6", true, &make_madgwick6_filter},
-    {"iecf", false, &make_iecf_filter},
-    {"iecf6", true, &make_iecf6_filter},
+    {.name = "complementary", .rejects_magnetometer = true, .make = &make_complementary_filter},
+    {.name = "dlkf", .rejects_magnetometer = true, .make = &make_dlkf_filter},
+    {.name = "ekf", .rejects_magnetometer = true, .make = &make_ekf_filter},
+    {.name = "mekf", .rejects_magnetometer = true, .make = &make_mekf_filter},
+    {.name = "mekf_adaptive", .rejects_magnetometer = true, .make = &make_mekf_adaptive_filter},
+    {.name = "seel_ruppin", .rejects_magnetometer = true, .make = &make_seel_ruppin_filter},
+    {.name = "seel_ruppin6", .six_d_only = true, .make = &make_seel_ruppin6_filter},
+    {.name = "madgwick", .make = &make_madgwick_filter},
+    {.name = "madgwick6", .six_d_only = true, .make = &make_madgwick6_filter},
+    {.name = "iecf", .rejects_magnetometer = true, .make = &make_iecf_filter},
+    {.name = "iecf6", .six_d_only = true, .make = &make_iecf6_filter},
 };
 
 }  // namespace

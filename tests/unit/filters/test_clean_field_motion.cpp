@@ -170,10 +170,10 @@ class GyroIntegral {
   std::uint64_t last_ns_ = 0;
 };
 
-// The filters whose rejection can be forced on by its thresholds, with those parameters (a band of 1e-6 that any
-// noise leaves; no new reference, no reduced-gain acceptance).
+// The filters whose rejection can be forced on by its thresholds (the registry's rejects_magnetometer), with those
+// parameters (a band of 1e-6 that any noise leaves; no new reference, no reduced-gain acceptance).
 std::vector<std::pair<std::string, double>> always_rejecting(const FilterInfo& info) {
-  if (is_one_of(info, {"complementary", "seel_ruppin", "iecf", "ekf", "mekf", "mekf_adaptive", "dlkf"})) {
+  if (info.rejects_magnetometer) {
     return {{"mag_norm_enter", 1e-6},
             {"mag_norm_leave", 1e-6},
             {"mag_reference_tau_s", 1e6},

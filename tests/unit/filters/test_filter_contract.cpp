@@ -71,6 +71,26 @@ TEST_P(FilterContract, IsListedNamedAndChecksParameterNames) {
   }
 }
 
+// The registry's rejects_magnetometer says the filter takes the shared MagDisturbanceDetector's parameters (the
+// tests that force a rejection set them); a 9D filter without the flag takes none of them, so a filter given the
+// detector but not the flag fails here instead of having its rejection tests run without the rejection.
+TEST_P(FilterContract, RejectsMagnetometerFlagMatchesTheDetectorParameters) {
+  // The set CleanFieldMotion forces the rejection with: valid together for every filter with the detector.
+  const std::vector<std::pair<std::string, double>> detector = {{"mag_norm_enter", 1e-6},
+                                                                {"mag_norm_leave", 1e-6},
+                                                                {"mag_reference_tau_s", 1e6},
+                                                                {"mag_max_rejection_s", 1e6},
+                                                                {"mag_accept_after_s", 1e6}};
+  if (GetParam().rejects_magnetometer) {
+    EXPECT_NO_THROW(make_filter({GetParam().name, detector}));
+  } else if (!six_d_only()) {
+    for (const auto& parameter : detector) {
+      EXPECT_THROW(make_filter({GetParam().name, {parameter}}), std::invalid_argument) << parameter.first;
+    }
+  }
+  EXPECT_FALSE(GetParam().rejects_magnetometer && six_d_only());
+}
+
 // TRIAD from the first exact sample is exact to rounding at any heading (6D-only filters too take the first heading
 // from the magnetometer), and exact readings of a still sensor leave nothing to correct. 1e-9 rad is a few thousand
 // roundings; holding over 10 s gets 1e-8 rad: the EKF's additive quaternion state is renormalised every step.

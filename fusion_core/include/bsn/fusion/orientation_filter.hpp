@@ -119,11 +119,15 @@ struct FilterSpec {
   std::vector<std::pair<std::string, double>> parameters;
 };
 
-/// One registered filter.
+/// One registered filter: its name, its capabilities (what the tests of every filter ask of it) and its maker.
 struct FilterInfo {
   const char* name;
-  bool six_d_only;  ///< never uses the magnetometer after the start (which may take its heading from it)
-  std::unique_ptr<OrientationFilter> (*make)(const FilterSpec&);  ///< throws as make_filter() does
+  /// Never uses the magnetometer after the start (which may take its heading from it).
+  bool six_d_only = false;
+  /// Rejects a disturbed magnetometer with the shared MagDisturbanceDetector, whose parameters (mag_norm_enter,
+  /// mag_norm_leave, mag_reference_tau_s, mag_max_rejection_s, mag_accept_after_s ...) it takes under their names.
+  bool rejects_magnetometer = false;
+  std::unique_ptr<OrientationFilter> (*make)(const FilterSpec&) = nullptr;  ///< throws as make_filter() does
 };
 
 /// Every filter the body model can name, in the order filter_names() lists them.
