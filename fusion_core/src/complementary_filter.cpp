@@ -48,8 +48,10 @@ double atan2_over_y(double y, double x) {
 
 }  // namespace
 
-ComplementaryFilter::ComplementaryFilter(const Params& params)
-    : OrientationFilter(kName, params), params_(params), rest_(params), bias_(params), mag_detector_(params) {
+ComplementaryFilter::ComplementaryFilter(const Params& params) : OrientationFilter(kName, params), params_(params) {
+  state_.rest = RestDetector(params);
+  state_.bias_lowpass = GyroBiasLowPass(params);
+  state_.mag_detector = MagDisturbanceDetector(params);
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
   require_non_negative(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
@@ -60,6 +62,7 @@ ComplementaryFilter::ComplementaryFilter(const Params& params)
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
   coeff_.bias_lowpass = params.gyro_bias_lowpass != 0.0;
+  initial_ = state_;
 }
 
 UpdateResult ComplementaryFilter::start(const ImuSample& s) {
@@ -69,9 +72,9 @@ UpdateResult ComplementaryFilter::start(const ImuSample& s) {
   const bool mag_usable = initial->with_mag;
   state_.q = initial->q;
   state_.flags = start_flags(s.has_mag && !mag_usable);
-  rest_.reset();
-  mag_detector_.reset();
-  if (mag_usable) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());  // the reference field
+  state_.rest.reset();
+  state_.mag_detector.reset();
+  if (mag_usable) state_.mag_detector.update(s.timestamp_ns, s.mag, s.acc.normalized());  // the reference field
   return UpdateResult::kInitialised;
 }
 
@@ -87,7 +90,7 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
 
   // Strapdown prediction: exact for a rate constant over the step (sensor-frame increment on the right).
   // The bias estimate stays zero without the low-pass.
-  if (s.has_gyr) q = q * exp_rotation_vector((s.gyr - bias_.bias()) * dt);
+  if (s.has_gyr) q = q * exp_rotation_vector((s.gyr - state_.bias_lowpass.bias()) * dt);
 
   // Tilt correction: turn the earth-frame image of the measured up direction towards earth z, by the fraction
   // gain_acc of the angle between them (at most max_acc_error_rad after the start-up), about their common
@@ -114,7 +117,8 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   // Heading correction about earth z only, so the magnetometer never tilts the estimate.
   state_.flags.mag_rejected = false;
   if (s.has_mag) {
-    const Vec3 mag = mag_at_gyro_time(s, bias_.bias(), params_.mag_latency_s);  // the magnetometer's own delay
+    const Vec3 mag =
+        mag_at_gyro_time(s, state_.bias_lowpass.bias(), params_.mag_latency_s);  // the magnetometer's own delay
     const double norm = mag.norm();
     const Vec3 m_earth = rotate(q, mag);
     const double horizontal_squared = m_earth.x() * m_earth.x() + m_earth.y() * m_earth.y();
@@ -122,10 +126,10 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
     bool disturbed = false;
     if (params_.mag_rejection != 0.0) {
       const Vec3 up = earth_axis_in_sensor(q, 2);
-      const double horizontal_rate = s.has_gyr ? (s.gyr - bias_.bias()).cross(up).norm() : 0.0;
-      mag_detector_.update(s.timestamp_ns, mag, up, horizontal_rate, dt);
-      disturbed = !mag_detector_.usable();
-      gain_factor = mag_detector_.gain_factor();  // < 1 for a field used after a long rejection
+      const double horizontal_rate = s.has_gyr ? (s.gyr - state_.bias_lowpass.bias()).cross(up).norm() : 0.0;
+      state_.mag_detector.update(s.timestamp_ns, mag, up, horizontal_rate, dt);
+      disturbed = !state_.mag_detector.usable();
+      gain_factor = state_.mag_detector.gain_factor();  // < 1 for a field used after a long rejection
     }
     if (disturbed || horizontal_squared < 1e-12 * norm * norm || norm <= 1e-9) {
       state_.flags.mag_rejected = true;
@@ -138,8 +142,8 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   }
   state_.q.coeffs() = q.coeffs() * inverse_sqrt_near_one(q.coeffs().squaredNorm());
 
-  if (s.has_gyr && coeff_.bias_lowpass) bias_.update(s.timestamp_ns, dt, s.gyr);
-  state_.flags.resting = rest_.update(s);
+  if (s.has_gyr && coeff_.bias_lowpass) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
+  state_.flags.resting = state_.rest.update(s);
   state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }

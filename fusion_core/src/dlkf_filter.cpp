@@ -138,11 +138,10 @@ Quat DlkfFilter::triad(const Vec3& up, const Vec3& field) {
   return triad_from_unit_up(kalman_support::unit(up), field);
 }
 
-DlkfFilter::DlkfFilter(const Params& params)
-    : OrientationFilter(kName, params),
-      params_(params),
-      bias_({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s}),
-      r_adaption_(params.thresholds()) {
+DlkfFilter::DlkfFilter(const Params& params) : OrientationFilter(kName, params), params_(params) {
+  state_.bias_lowpass =
+      GyroBiasLowPass({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s});
+  state_.r_adaption = MagneticRAdaption(params.thresholds());
   require_positive(kName, params.sigma_g, "sigma_g");
   require_positive(kName, params.sigma_a, "sigma_a");
   require_positive(kName, params.sigma_ext_acc, "sigma_ext_acc");
@@ -165,18 +164,16 @@ DlkfFilter::DlkfFilter(const Params& params)
   const double acc_low = std::max(kGravity - params.acc_rejection_m_s2, 0.0);
   coeff_.acc_accept_min2 = acc_low * acc_low;
   coeff_.acc_accept_max2 = (kGravity + params.acc_rejection_m_s2) * (kGravity + params.acc_rejection_m_s2);
-  rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
+  state_.rest = RestDetector(params);  // after the checks above, so their errors name the filter
+  initial_ = state_;
 }
 
-void DlkfFilter::clear() {
-  restart_keeping_bias();
-  bias_.reset();
-}
+void DlkfFilter::clear() { state_ = initial_; }
 
 void DlkfFilter::restart_keeping_bias() {
-  state_ = State{};
-  r_adaption_.reset();
-  rest_.reset();
+  const GyroBiasLowPass bias_lowpass = state_.bias_lowpass;
+  state_ = initial_;
+  state_.bias_lowpass = bias_lowpass;
 }
 
 void DlkfFilter::initialise_magnetic(const Vec3& mag) {
@@ -207,10 +204,10 @@ UpdateResult DlkfFilter::start(const ImuSample& s) {
 UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
 
-  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
+  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
   // Mean of the previous and the current rate: second-order accurate over the step.
-  const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - bias_.bias()) : Vec3::Zero();
-  const Vec3 w = state_.have_gyr_prev ? Vec3(0.5 * (w_now + state_.gyr_prev - bias_.bias())) : w_now;
+  const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - state_.bias_lowpass.bias()) : Vec3::Zero();
+  const Vec3 w = state_.have_gyr_prev ? Vec3(0.5 * (w_now + state_.gyr_prev - state_.bias_lowpass.bias())) : w_now;
   state_.gyr_prev = s.gyr;
   state_.have_gyr_prev = s.has_gyr;
   const Mat3 turn = sensor_frame_turn(w, dt);
@@ -229,7 +226,7 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
       (params_.acc_rejection_m_s2 == 0.0 || (acc2 >= coeff_.acc_accept_min2 && acc2 <= coeff_.acc_accept_max2))) {
     const Vec3 g_before = state_.gravity.vector();
     state_.gravity.correct(s.acc, coeff_.var_a);
-    if (!state_.have_mag || r_adaption_.disturbed()) {  // (never disturbed with mag_rejection 0: never judged)
+    if (!state_.have_mag || state_.r_adaption.disturbed()) {  // (never disturbed with mag_rejection 0: never judged)
       // The correction turns the estimated gravity, i.e. the estimated orientation, so the field vector turns with
       // it while no magnetometer steers it. Left alone it would keep the gyro's tilt error that the accelerometer
       // just removed from gravity, and TRIAD would read that tilt error through the field's dip as heading: started
@@ -263,8 +260,8 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
       bool use = true;
       double scale = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
       if (params_.mag_rejection != 0.0) {
-        scale =
-            r_adaption_.update(s.timestamp_ns, s.mag, up, state_.mag_ref, s.has_gyr ? s.gyr.cross(up).norm() : 0.0, dt);
+        scale = state_.r_adaption.update(s.timestamp_ns, s.mag, up, state_.mag_ref,
+                                         s.has_gyr ? s.gyr.cross(up).norm() : 0.0, dt);
         use = std::isfinite(scale);
       }
       if (use) {
@@ -282,7 +279,7 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
   const Vec3 h = state_.magnetic.vector();
   if (up.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad_from_unit_up(up, h);
 
-  state_.flags.resting = rest_.update(s);
+  state_.flags.resting = state_.rest.update(s);
   state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }

@@ -69,8 +69,8 @@ Mat34 rotate_to_sensor_jacobian(const Quat& q, const Vec3& v) {
 
 }  // namespace
 
-EkfFilter::EkfFilter(const Params& params)
-    : OrientationFilter(kName, params), params_(params), r_adaption_(params.thresholds()) {
+EkfFilter::EkfFilter(const Params& params) : OrientationFilter(kName, params), params_(params) {
+  state_.r_adaption = MagneticRAdaption(params.thresholds());
   require_positive(kName, params.sigma_g, "sigma_g");
   require_positive(kName, params.sigma_bg, "sigma_bg");
   require_positive(kName, params.sigma_a, "sigma_a");
@@ -87,14 +87,11 @@ EkfFilter::EkfFilter(const Params& params)
   coeff_.var_m = params.sigma_m * params.sigma_m;
   coeff_.var_a_max = params.acc_variance_cap * coeff_.var_a;
   coeff_.var_g_per_s = params.sigma_g * params.sigma_g;
-  rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
+  state_.rest = RestDetector(params);  // after the checks above, so their errors name the filter
+  initial_ = state_;
 }
 
-void EkfFilter::clear() {
-  state_ = State{};
-  r_adaption_.reset();
-  rest_.reset();
-}
+void EkfFilter::clear() { state_ = initial_; }
 
 EkfFilter::Mat6 EkfFilter::error_covariance() const {
   Eigen::Matrix<double, 6, 7> t = Eigen::Matrix<double, 6, 7>::Zero();
@@ -219,7 +216,7 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
     state_.p.bottomRightCorner<3, 3>().diagonal().array() += params_.sigma_bg * params_.sigma_bg * dt;
   }
 
-  state_.flags.resting = rest_.update(s);
+  state_.flags.resting = state_.rest.update(s);
   if (state_.flags.resting && params_.rest_bias_update != 0.0) learn_bias_at_rest(s.gyr, dt);
 
   // Magnetometer: usable unless the R-adaption sets its variance to infinity.
@@ -246,7 +243,7 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
       use_mag = true;
       if (params_.mag_rejection != 0.0) {
         const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(up).norm() : 0.0;  // horizontal rate
-        const double scale = r_adaption_.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged, rate, dt);
+        const double scale = state_.r_adaption.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged, rate, dt);
         use_mag = std::isfinite(scale);
         if (use_mag) mag_variance_factor = scale;
         state_.flags.mag_rejected = !use_mag;

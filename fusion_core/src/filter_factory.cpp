@@ -1,3 +1,4 @@
+#include <stdexcept>
 #include <string>
 
 #include "bsn/fusion/complementary_filter.hpp"
@@ -34,6 +35,23 @@ OrientationFilter::OrientationFilter(std::string_view filter, const FilterTiming
   timing.check(filter);
   max_gap_ns_ = seconds_to_ns(timing.max_gap_s);
   init_period_ns_ = seconds_to_ns(timing.init_period_s);
+}
+
+std::unique_ptr<FilterSnapshot> OrientationFilter::save() const {
+  std::unique_ptr<FilterSnapshot> snapshot = save_state();
+  snapshot->filter_ = name();
+  snapshot->clock_ = clock_;
+  return snapshot;
+}
+
+void OrientationFilter::restore(const FilterSnapshot& snapshot) {
+  // Names are unique in the registry and every name belongs to one class, so the name tells the State's type.
+  if (snapshot.filter_ != name()) {
+    throw std::invalid_argument("cannot restore a state of filter '" + std::string(snapshot.filter_) +
+                                "' into filter '" + std::string(name()) + "'");
+  }
+  restore_state(snapshot);
+  clock_ = snapshot.clock_;
 }
 
 std::span<const FilterInfo> filter_registry() { return kFilters; }

@@ -34,12 +34,13 @@ const P& checked(const P& p, std::string_view name) {
 IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
     : OrientationFilter(use_magnetometer ? "iecf" : "iecf6", params),
       params_(checked(params, use_magnetometer ? "iecf" : "iecf6")),
-      use_magnetometer_(use_magnetometer),
-      rest_(params),
-      bias_(params),
-      mag_detector_(params) {
+      use_magnetometer_(use_magnetometer) {
+  state_.rest = RestDetector(params);
+  state_.bias_lowpass = GyroBiasLowPass(params);
+  state_.mag_detector = MagDisturbanceDetector(params);
   // |gain e dt| <= gain (|e_a| + weight |e_m|) dt <= gain (dt + max_gap_s) <= 2 gain max_gap_s (unit crosses).
   coeff_.correction_bounded = 2.0 * std::max(params.gain, params.initial_gain) * params.max_gap_s < 1e149;
+  initial_ = state_;
 }
 
 double IecfFilter::gain_at(double since_init_s) const {
@@ -48,12 +49,7 @@ double IecfFilter::gain_at(double since_init_s) const {
   return params_.initial_gain + (params_.gain - params_.initial_gain) * fraction;
 }
 
-void IecfFilter::clear() {
-  state_ = State{};
-  rest_.reset();
-  bias_.reset();
-  mag_detector_.reset();
-}
+void IecfFilter::clear() { state_ = initial_; }
 
 UpdateResult IecfFilter::start(const ImuSample& s) {
   // IECF6 too takes its initial heading from the magnetometer when there is one (Fan's IECF6 "with the
@@ -65,25 +61,28 @@ UpdateResult IecfFilter::start(const ImuSample& s) {
   state_.heading_known = with_mag;
   state_.last_mag_ns = with_mag ? s.timestamp_ns : 0;
   state_.flags = start_flags(use_magnetometer_ && s.has_mag && !with_mag);
-  rest_.reset();
-  mag_detector_.reset();
-  if (with_mag && use_magnetometer_) mag_detector_.update(s.timestamp_ns, s.mag, s.acc.normalized());
-  state_.flags.resting = rest_.update(s);
+  state_.rest.reset();
+  state_.mag_detector.reset();
+  if (with_mag && use_magnetometer_) state_.mag_detector.update(s.timestamp_ns, s.mag, s.acc.normalized());
+  state_.flags.resting = state_.rest.update(s);
   return UpdateResult::kInitialised;
 }
 
 UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
-  const Vec3 mag = mag_at_gyro_time(s, bias_.bias(), params_.mag_latency_s);  // the magnetometer's own delay
+  const Vec3 mag =
+      mag_at_gyro_time(s, state_.bias_lowpass.bias(), params_.mag_latency_s);  // the magnetometer's own delay
   const std::uint64_t dt_ns = s.timestamp_ns - clock().last_ns;
   const std::uint64_t since_init_ns = s.timestamp_ns - clock().init_ns;
   const double gain =
       since_init_ns >= init_period_ns() ? params_.gain : gain_at(static_cast<double>(since_init_ns) * 1e-9);
-  const Vec3 rate = !s.has_gyr ? Vec3::Zero() : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - bias_.bias()) : s.gyr;
+  const Vec3 rate = !s.has_gyr                         ? Vec3::Zero()
+                    : params_.gyro_bias_lowpass != 0.0 ? Vec3(s.gyr - state_.bias_lowpass.bias())
+                                                       : s.gyr;
   const Vec3 gyro_step = rate * dt;
   // The step can only overflow (and the sample be rejected) for an absurd rate or gain: only then is the detector
   // saved, to be restored on rejection.
   std::optional<MagDisturbanceDetector> detector_before;
-  if (!(gyro_step.squaredNorm() < 1e300) || !coeff_.correction_bounded) detector_before = mag_detector_;
+  if (!(gyro_step.squaredNorm() < 1e300) || !coeff_.correction_bounded) detector_before = state_.mag_detector;
   Quat q = state_.q;
   bool mag_used = false;
   bool mag_rejected = false;
@@ -102,10 +101,10 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
     if (mag_squared_norm > 1e-18 && m_cross_a_squared_norm > 1e-6 * mag_squared_norm) {
       double mag_weight = 1.0;
       if (params_.mag_rejection != 0.0) {
-        mag_detector_.update(s.timestamp_ns, mag, up_est, rate.cross(up_est).norm(), dt);  // horizontal rate
-        mag_weight = mag_detector_.gain_factor();  // < 1 for a field used after a long rejection
+        state_.mag_detector.update(s.timestamp_ns, mag, up_est, rate.cross(up_est).norm(), dt);  // horizontal rate
+        mag_weight = state_.mag_detector.gain_factor();  // < 1 for a field used after a long rejection
       }
-      if (params_.mag_rejection != 0.0 && !mag_detector_.usable()) {
+      if (params_.mag_rejection != 0.0 && !state_.mag_detector.usable()) {
         mag_rejected = true;
       } else if (!state_.heading_known) {
         q = orientation_from_acc_mag(s.acc, mag);  // first heading after a start without magnetometer
@@ -130,7 +129,7 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
   q = q * exp_rotation_vector(gyro_step + (gain * dt) * error);   // eqs. 14-15, exact for the step
   q.coeffs() *= inverse_sqrt_near_one(q.coeffs().squaredNorm());  // a product of unit quaternions
   if (!std::isfinite(q.w() + q.x() + q.y() + q.z())) {            // normalised: finite sum = finite components
-    if (detector_before) mag_detector_ = *detector_before;        // extreme finite input: keep the state
+    if (detector_before) state_.mag_detector = *detector_before;  // extreme finite input: keep the state
     return UpdateResult::kRejected;
   }
 
@@ -141,8 +140,8 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
   }
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = mag_rejected;
-  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) bias_.update(s.timestamp_ns, dt, s.gyr);
-  state_.flags.resting = rest_.update(s);
+  if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
+  state_.flags.resting = state_.rest.update(s);
   state_.flags.initialising = since_init_ns < init_period_ns();
   return UpdateResult::kUpdated;
 }

@@ -27,14 +27,15 @@ const P& checked(const P& p, std::string_view name) {
 MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
     : OrientationFilter(use_magnetometer ? "madgwick" : "madgwick6", params),
       params_(checked(params, use_magnetometer ? "madgwick" : "madgwick6")),
-      use_magnetometer_(use_magnetometer),
-      rest_(params),
-      // Fan's plain low-pass, without the running mean of the first still time: madgwick has no other bound on its
-      // tilt under sustained acceleration, and in Nez's fast motion (the Opal's zero-mean Gauss-Markov bias, 100 s
-      // correlation, which a frozen rest estimate matches worse than zero after about a minute) the full estimate
-      // took its inclination above the gyro's own integral (seed 12: 10.16 against 9.80 deg; 9.36 with the plain one).
-      bias_(params, false) {
+      use_magnetometer_(use_magnetometer) {
+  state_.rest = RestDetector(params);
+  // Fan's plain low-pass, without the running mean of the first still time: madgwick has no other bound on its
+  // tilt under sustained acceleration, and in Nez's fast motion (the Opal's zero-mean Gauss-Markov bias, 100 s
+  // correlation, which a frozen rest estimate matches worse than zero after about a minute) the full estimate
+  // took its inclination above the gyro's own integral (seed 12: 10.16 against 9.80 deg; 9.36 with the plain one).
+  state_.bias_lowpass = GyroBiasLowPass(params, false);
   coeff_.bias_lowpass = params.gyro_bias_lowpass != 0.0;
+  initial_ = state_;
 }
 
 // R(q)^T d for a unit q = (w, x, y, z) in the paper's form (diagonal terms 1 - 2(..)), and its Jacobian as the
@@ -75,11 +76,7 @@ Eigen::Vector4d MadgwickFilter::gradient(const Quat& q, const Vec3& acc_unit, co
   return grad;
 }
 
-void MadgwickFilter::clear() {
-  state_ = State{};
-  rest_.reset();
-  bias_.reset();
-}
+void MadgwickFilter::clear() { state_ = initial_; }
 
 UpdateResult MadgwickFilter::start(const ImuSample& s) {
   // The 6D variant too takes its initial heading from the magnetometer when there is one (an absolute start,
@@ -91,8 +88,8 @@ UpdateResult MadgwickFilter::start(const ImuSample& s) {
   state_.flags = start_flags(use_magnetometer_ && s.has_mag && !with_mag);
   state_.held_mag = with_mag && use_magnetometer_ ? s.mag : Vec3::Zero();
   state_.held_mag_ns = with_mag && use_magnetometer_ ? s.timestamp_ns : 0;
-  rest_.reset();
-  state_.flags.resting = rest_.update(s);
+  state_.rest.reset();
+  state_.flags.resting = state_.rest.update(s);
   return UpdateResult::kInitialised;
 }
 
@@ -105,7 +102,7 @@ UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
   // Gyro part, integrated exactly for a rate constant over the step (the paper's Euler step of
   // q_dot = q (x) (0, w) / 2 is its first-order approximation).
   if (s.has_gyr) {
-    const Vec3 rate = coeff_.bias_lowpass ? Vec3(s.gyr - bias_.bias()) : s.gyr;
+    const Vec3 rate = coeff_.bias_lowpass ? Vec3(s.gyr - state_.bias_lowpass.bias()) : s.gyr;
     const Quat increment = exp_rotation_vector(rate * dt);
     q = q * increment;
     if (hold) held_mag = rotate(increment.conjugate(), held_mag);  // a fixed earth vector, turned sensor
@@ -187,8 +184,8 @@ UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
   if (use_magnetometer_ && s.has_mag && !with_mag) state_.held_mag_ns = 0;  // a bad reading ends the hold
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
-  if (s.has_gyr && coeff_.bias_lowpass) bias_.update(s.timestamp_ns, dt, s.gyr);
-  state_.flags.resting = rest_.update(s);
+  if (s.has_gyr && coeff_.bias_lowpass) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
+  state_.flags.resting = state_.rest.update(s);
   state_.flags.initialising = within_init_period(s.timestamp_ns);
   return UpdateResult::kUpdated;
 }

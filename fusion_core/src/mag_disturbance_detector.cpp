@@ -82,18 +82,18 @@ void MagDisturbanceDetector::set_reference_bounds(double norm_uT, double sin_dip
   state_.ref_sin_dip = state_.reference_known ? std::clamp(sin_dip, -1.0, 1.0) : 0.0;
   state_.ref_cos_dip = std::sqrt(1.0 - state_.ref_sin_dip * state_.ref_sin_dip);
   const double ref = state_.ref_norm;
-  bounds_.norm_enter_low = ref * (1.0 - params_.mag_norm_enter);
-  bounds_.norm_enter_high = ref * (1.0 + params_.mag_norm_enter);
-  bounds_.norm_leave_low = ref * (1.0 - params_.mag_norm_leave);
-  bounds_.norm_leave_high = ref * (1.0 + params_.mag_norm_leave);
+  state_.bounds.norm_enter_low = ref * (1.0 - params_.mag_norm_enter);
+  state_.bounds.norm_enter_high = ref * (1.0 + params_.mag_norm_enter);
+  state_.bounds.norm_leave_low = ref * (1.0 - params_.mag_norm_leave);
+  state_.bounds.norm_leave_high = ref * (1.0 + params_.mag_norm_leave);
   const SineBounds enter =
       sine_bounds(state_.ref_sin_dip, state_.ref_cos_dip, sin_enter_, cos_enter_, enter_beyond_pi_);
   const SineBounds leave =
       sine_bounds(state_.ref_sin_dip, state_.ref_cos_dip, sin_leave_, cos_leave_, leave_beyond_pi_);
-  bounds_.sin_enter_low = enter.low;
-  bounds_.sin_enter_high = enter.high;
-  bounds_.sin_leave_low = leave.low;
-  bounds_.sin_leave_high = leave.high;
+  state_.bounds.sin_enter_low = enter.low;
+  state_.bounds.sin_enter_high = enter.high;
+  state_.bounds.sin_leave_low = leave.low;
+  state_.bounds.sin_leave_high = leave.high;
 }
 
 double MagDisturbanceDetector::last_norm_deviation() const {
@@ -159,10 +159,10 @@ bool MagDisturbanceDetector::update(std::uint64_t t_ns, const Vec3& mag, const V
 
   // |dev| > enter and |dev| < leave for the magnitude, and the same for the dip as its sine, |m| sin(dip) against
   // the sines of the band limits times |m| (no division).
-  const bool norm_outside_enter = n > bounds_.norm_enter_high || n < bounds_.norm_enter_low;
-  const bool norm_inside_leave = n < bounds_.norm_leave_high && n > bounds_.norm_leave_low;
-  bool dip_outside_enter = n_down > bounds_.sin_enter_high * n || n_down < bounds_.sin_enter_low * n;
-  bool dip_inside_leave = n_down < bounds_.sin_leave_high * n && n_down > bounds_.sin_leave_low * n;
+  const bool norm_outside_enter = n > state_.bounds.norm_enter_high || n < state_.bounds.norm_enter_low;
+  const bool norm_inside_leave = n < state_.bounds.norm_leave_high && n > state_.bounds.norm_leave_low;
+  bool dip_outside_enter = n_down > state_.bounds.sin_enter_high * n || n_down < state_.bounds.sin_enter_low * n;
+  bool dip_inside_leave = n_down < state_.bounds.sin_leave_high * n && n_down > state_.bounds.sin_leave_low * n;
   if (state_.dip_tolerance > 0.0 && !dip_inside_leave) {
     // Turning: the bands widened by the lag tolerance, on the angle itself.
     const double dev = std::abs(asin_clamped(n_down / n) - asin_clamped(state_.ref_sin_dip));

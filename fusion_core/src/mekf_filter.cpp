@@ -165,10 +165,8 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg) {
 }  // namespace mekf
 
 MekfFilter::MekfFilter(const Params& params, bool adaptive)
-    : OrientationFilter(adaptive ? "mekf_adaptive" : "mekf", params),
-      params_(params),
-      adaptive_(adaptive),
-      r_adaption_(params.thresholds()) {
+    : OrientationFilter(adaptive ? "mekf_adaptive" : "mekf", params), params_(params), adaptive_(adaptive) {
+  state_.r_adaption = MagneticRAdaption(params.thresholds());
   const std::string_view n = adaptive ? "mekf_adaptive" : "mekf";
   coeff_.start_intensity = preset_index(n, params.preset);
   const char* names[] = {"sigma_g", "sigma_bg", "sigma_a", "sigma_m"};
@@ -220,16 +218,12 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
   coeff_.min_switch_interval_ns = seconds_to_ns(params.min_switch_interval_s);
   coeff_.switch_confirm_ns = seconds_to_ns(params.switch_confirm_s);
   coeff_.bias_cap_time_s = std::max(params.min_switch_interval_s, 1.0);
-  clear();
-  rest_ = RestDetector(params);  // after the checks above, so their errors name the filter
+  state_.intensity = coeff_.start_intensity;
+  state_.rest = RestDetector(params);  // after the checks above, so their errors name the filter
+  initial_ = state_;
 }
 
-void MekfFilter::clear() {
-  state_ = State{};
-  state_.intensity = coeff_.start_intensity;
-  r_adaption_.reset();
-  rest_.reset();
-}
+void MekfFilter::clear() { state_ = initial_; }
 
 MekfNoise MekfFilter::noise() const {
   return adaptive_ ? coeff_.sets[static_cast<std::size_t>(state_.intensity)] : coeff_.noise;
@@ -398,7 +392,7 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n, dou
   double mag_variance_factor = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
   if (params_.mag_rejection != 0.0) {
     const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(r3).norm() : 0.0;  // horizontal rate
-    mag_variance_factor = r_adaption_.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged, rate, dt);
+    mag_variance_factor = state_.r_adaption.update(s.timestamp_ns, s.mag, r3, state_.h_ref_judged, rate, dt);
     if (!std::isfinite(mag_variance_factor)) {
       state_.flags.mag_rejected = true;
       return;
@@ -466,7 +460,7 @@ UpdateResult MekfFilter::step(const ImuSample& s_in, double dt) {
   state_.p.bottomLeftCorner<3, 3>() = state_.p.topRightCorner<3, 3>().transpose();
   state_.p.bottomRightCorner<3, 3>().diagonal().array() += blocks.q22;
 
-  state_.flags.resting = rest_.update(s);
+  state_.flags.resting = state_.rest.update(s);
   if (state_.flags.resting && params_.rest_bias_update != 0.0) {
     // At rest the reading is the bias plus the set's gyro white noise of this step (see rest_bias_update).
     const Eigen::Matrix<double, 6, 1> dx =

@@ -89,10 +89,10 @@ double signed_angle(const Vec3& v, const Vec3& w, const Vec3& n) { return atan2_
 SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
     : OrientationFilter(use_magnetometer ? kName : kName6, params),
       params_(checked(params, use_magnetometer ? kName : kName6)),
-      use_magnetometer_(use_magnetometer),
-      rest_(params),
-      mag_detector_(params),
-      rest_bias_(params) {
+      use_magnetometer_(use_magnetometer) {
+  state_.rest = RestDetector(params);
+  state_.mag_detector = MagDisturbanceDetector(params);
+  state_.bias_lowpass = GyroBiasLowPass(params);
   coeff_.tau_acc_14 = 1.4 * params.tau_acc_s;
   coeff_.tau_mag_14 = 1.4 * params.tau_mag_s;
   coeff_.tau_start_mag_14 = 1.4 * std::min(params.tau_mag_s, params.tau_acc_s);
@@ -107,6 +107,7 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
   coeff_.acc_lowpass = params.acc_lowpass_tau_s > 0.0;
   coeff_.acc_lowpass_fc_hz =
       coeff_.acc_lowpass ? std::numbers::sqrt2 / (2.0 * std::numbers::pi * params.acc_lowpass_tau_s) : 0.0;
+  initial_ = state_;
 }
 
 void SeelRuppinFilter::LowPassCache::update(double dt, double fc_hz) {
@@ -155,12 +156,7 @@ double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
   return k;
 }
 
-void SeelRuppinFilter::clear() {
-  state_ = State{};
-  rest_.reset();
-  mag_detector_.reset();
-  rest_bias_.reset();
-}
+void SeelRuppinFilter::clear() { state_ = initial_; }
 
 UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
   if (!physically_possible(s)) return UpdateResult::kRejected;
@@ -176,9 +172,9 @@ UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
   state_.heading_known = mag_usable;
   state_.last_mag_ns = mag_usable ? s.timestamp_ns : 0;
   state_.flags = start_flags(use_magnetometer_ && s.has_mag && !mag_usable);
-  rest_.reset();
+  state_.rest.reset();
   start_mag_reference(s.timestamp_ns);
-  state_.flags.resting = rest_.update(s);
+  state_.flags.resting = state_.rest.update(s);
   return UpdateResult::kInitialised;
 }
 
@@ -216,7 +212,7 @@ Vec3 SeelRuppinFilter::acc_correction(const Vec3& acc, const Vec3& r_acc, double
 }
 
 void SeelRuppinFilter::start_mag_reference(std::uint64_t t_ns) {
-  mag_detector_.reset();
+  state_.mag_detector.reset();
   state_.mag_learning = true;
   state_.mag_learning_since_ns = t_ns;
   state_.mag_norm_sum = state_.mag_dip_sum = state_.mag_learning_count = 0.0;
@@ -231,16 +227,16 @@ bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const 
     state_.mag_dip_sum += MagDisturbanceDetector::dip_angle(mag, up);
     state_.mag_learning_count += 1.0;
     if (t_ns - state_.mag_learning_since_ns >= coeff_.mag_reference_ns) {
-      mag_detector_.set_reference(state_.mag_norm_sum / state_.mag_learning_count,
-                                  state_.mag_dip_sum / state_.mag_learning_count, params_.mag_reference_s);
+      state_.mag_detector.set_reference(state_.mag_norm_sum / state_.mag_learning_count,
+                                        state_.mag_dip_sum / state_.mag_learning_count, params_.mag_reference_s);
       state_.mag_learning = false;
     }
     return false;
   }
   // Disturbed readings are skipped, unless the rejection has lasted so long that the detector lets them in with a
   // reduced gain (the heading must not drift for ever).
-  mag_detector_.update(t_ns, mag, up, rate_rad_s, static_cast<double>(t_ns - clock().last_ns) * 1e-9);
-  return !mag_detector_.usable();
+  state_.mag_detector.update(t_ns, mag, up, rate_rad_s, static_cast<double>(t_ns - clock().last_ns) * 1e-9);
+  return !state_.mag_detector.usable();
 }
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
@@ -268,7 +264,7 @@ Vec3 SeelRuppinFilter::mag_correction(const ImuSample& s, const Vec3& mag, const
   const double k_full = !state_.heading_known       ? 1.0
                         : state_.flags.initialising ? start_mag_gain_.gain(dt_mag, coeff_.tau_start_mag_14)
                                                     : mag_gain_.gain(dt_mag, coeff_.tau_mag_14);
-  const double k = params_.mag_rejection != 0.0 ? k_full * mag_detector_.gain_factor() : k_full;
+  const double k = params_.mag_rejection != 0.0 ? k_full * state_.mag_detector.gain_factor() : k_full;
   const Vec3 rotation = (k * alpha) * r_acc;  // eq. 12
   if (state_.heading_known && !state_.flags.initialising) state_.gyro_bias -= coeff_.bias_factor_mag * rotation;
   state_.heading_known = true;
@@ -315,11 +311,12 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
     return UpdateResult::kRejected;
   }
   if (params_.rest_bias_lowpass != 0.0 && s.has_gyr) {
-    rest_bias_.set_bias(state_.gyro_bias);
-    rest_bias_.update(s.timestamp_ns, dt, s.gyr);
-    if (rest_bias_.updating()) state_.gyro_bias = rest_bias_.bias().cwiseMax(-max_bias).cwiseMin(max_bias);
+    state_.bias_lowpass.set_bias(state_.gyro_bias);
+    state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
+    if (state_.bias_lowpass.updating())
+      state_.gyro_bias = state_.bias_lowpass.bias().cwiseMax(-max_bias).cwiseMin(max_bias);
   }
-  state_.flags.resting = rest_.update(s);
+  state_.flags.resting = state_.rest.update(s);
   return UpdateResult::kUpdated;
 }
 

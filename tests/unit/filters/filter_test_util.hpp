@@ -102,4 +102,31 @@ inline std::vector<sim::ScenarioSample> turning_sensor(std::uint64_t seed, doubl
   return samples;
 }
 
+/// A stream with everything a filter keeps between samples at work, at 100 Hz for 45 s, white noise of TurningNoise
+/// throughout and a gyro bias of about 0.6 deg/s: 10 s at rest (rest detection, bias learning), then turning_sensor()'s
+/// motion with a 0.5 s gap (bridged) at 20 s and a 1.5 s gap (restart) at 28 s, the magnetometer on four samples of
+/// five, and a 20 uT disturbance (40 % of the field, beyond every detector's threshold) from 33 s to 38 s.
+inline std::vector<ImuSample> stateful_stream() {
+  const Vec3 bias(0.01, -0.008, 0.005);
+  const std::vector<sim::ScenarioSample> motion = turning_sensor(5, 35.0, false);
+  WhiteNoise noise(7, TurningNoise::kAccMS2, TurningNoise::kGyrRadS, TurningNoise::kMagUT);
+  std::vector<ImuSample> out;
+  for (int k = 0; k < 1000; ++k) {
+    out.push_back(noise.add_to(
+        static_sample(motion.front().truth, at_ns(static_cast<std::uint64_t>(k) * 10 * kMs), kField, bias)));
+  }
+  const std::uint64_t motion_start_ns = 10'000 * kMs;
+  for (std::size_t k = 0; k < motion.size(); ++k) {
+    ImuSample s = motion[k].sample;
+    s.timestamp_ns += motion_start_ns;
+    const double t_s = static_cast<double>(s.timestamp_ns) * 1e-9;
+    if ((t_s > 20.0 && t_s < 20.5) || (t_s > 28.0 && t_s < 29.5)) continue;  // the gaps
+    s.gyr += bias;
+    s.has_mag = k % 5 != 0;
+    if (t_s >= 33.0 && t_s < 38.0) s.mag += motion[k].truth.conjugate() * Vec3(0.0, 20.0, 0.0);
+    out.push_back(s);
+  }
+  return out;
+}
+
 }  // namespace bsn::fusion::filter_test

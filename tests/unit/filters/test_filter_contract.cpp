@@ -55,6 +55,19 @@ TEST(FilterRegistry, ListsUniqueNamesAndNamesAnUnknownOne) {
   }
 }
 
+TEST(FilterRegistry, RestoringAnotherFiltersStateThrowsNamingBoth) {
+  const auto complementary = make_filter({"complementary", {}});
+  complementary->update(filter_test::static_sample(Quat::Identity(), at_s(0)));
+  const auto madgwick = make_filter({"madgwick", {}});
+  try {
+    madgwick->restore(*complementary->save());
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'complementary' into filter 'madgwick'"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(madgwick->initialised());
+}
+
 TEST_P(FilterContract, IsListedNamedAndChecksParameterNames) {
   const auto names = filter_names();
   EXPECT_NE(std::find(names.begin(), names.end(), GetParam().name), names.end());
@@ -271,6 +284,84 @@ TEST_P(FilterContract, SameStreamGivesBitIdenticalOutput) {
         ASSERT_EQ(f->orientation().coeffs(), first[k].coeffs()) << " sample " << k;
       }
     }
+  }
+}
+
+// One sample's output, compared bit for bit.
+struct Output {
+  Quat q;
+  Vec3 bias;
+  FilterFlags flags;
+};
+Output output_of(const OrientationFilter& f) { return {f.orientation(), f.gyro_bias(), f.flags()}; }
+::testing::AssertionResult identical(const Output& a, const Output& b) {
+  if (a.q.coeffs() != b.q.coeffs()) return ::testing::AssertionFailure() << "orientations differ";
+  if (a.bias != b.bias) return ::testing::AssertionFailure() << "gyro biases differ";
+  if (a.flags.resting != b.flags.resting || a.flags.mag_rejected != b.flags.mag_rejected ||
+      a.flags.initialising != b.flags.initialising || a.flags.reinitialised != b.flags.reinitialised) {
+    return ::testing::AssertionFailure() << "flags differ";
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// save() holds everything a filter keeps between samples: a fresh filter of the same parameters that restore()s it
+// continues bit for bit as the one it was saved from, wherever the stream is saved (at rest while the bias is learnt,
+// in motion, just after the restart of a long gap, within a magnetometer disturbance), and the saved filter itself
+// continues unchanged by the saving.
+TEST_P(FilterContract, SavedAndRestoredStateContinuesBitIdentically) {
+  const std::vector<ImuSample> stream = filter_test::stateful_stream();
+  std::vector<Output> reference;
+  auto f = make();
+  int resting = 0, rejected = 0, restarts = 0;
+  for (const ImuSample& s : stream) {
+    f->update(s);
+    reference.push_back(output_of(*f));
+    resting += f->flags().resting;
+    rejected += f->flags().mag_rejected;
+    restarts += f->flags().reinitialised;
+  }
+  // The stream does what it claims: rest, the restart after the long gap, a rejected magnetometer.
+  EXPECT_GT(resting, 100);
+  EXPECT_EQ(restarts, 2);  // the first sample and the long gap
+  if (GetParam().rejects_magnetometer) {
+    EXPECT_GT(rejected, 100);
+  }
+  for (const double save_at_s : {5.0, 15.0, 29.6, 35.0}) {
+    const auto save_at = static_cast<std::size_t>(
+        std::find_if(stream.begin(), stream.end(),
+                     [&](const ImuSample& s) { return s.timestamp_ns >= at_s(save_at_s).ns; }) -
+        stream.begin());
+    ASSERT_LT(save_at, stream.size());
+    auto saved = make();
+    for (std::size_t k = 0; k <= save_at; ++k) saved->update(stream[k]);
+    const std::unique_ptr<FilterSnapshot> snapshot = saved->save();
+    EXPECT_EQ(snapshot->filter(), GetParam().name);
+    auto restored = make();
+    restored->restore(*snapshot);
+    EXPECT_TRUE(restored->initialised());
+    ASSERT_TRUE(identical(output_of(*restored), reference[save_at])) << "sample " << save_at;
+    for (std::size_t k = save_at + 1; k < stream.size(); ++k) {
+      saved->update(stream[k]);
+      restored->update(stream[k]);
+      ASSERT_TRUE(identical(output_of(*saved), reference[k])) << "sample " << k << ", saved at " << save_at_s << " s";
+      ASSERT_TRUE(identical(output_of(*restored), reference[k]))
+          << "sample " << k << ", saved at " << save_at_s << " s";
+    }
+  }
+}
+
+// reset() forgets everything: the same stream afterwards gives a fresh filter's output bit for bit.
+TEST_P(FilterContract, ResetThenTheSameStreamGivesAFreshFiltersOutput) {
+  const std::vector<ImuSample> stream = filter_test::stateful_stream();
+  auto fresh = make();
+  auto used = make();
+  for (const ImuSample& s : stream) used->update(s);
+  used->reset();
+  EXPECT_FALSE(used->initialised());
+  for (std::size_t k = 0; k < stream.size(); ++k) {
+    fresh->update(stream[k]);
+    used->update(stream[k]);
+    ASSERT_TRUE(identical(output_of(*used), output_of(*fresh))) << "sample " << k;
   }
 }
 

@@ -71,10 +71,13 @@ class ComplementaryFilter final : public OrientationFilter {
   };
 
   struct State {
-    Quat q = Quat::Identity();  ///< sensor-to-earth
-    double gain_dt_s = -1.0;    ///< step for which gain_acc and gain_mag hold (dt rarely changes), s
-    double gain_acc = 0.0;      ///< 1 - exp(-dt / tau_acc)
-    double gain_mag = 0.0;      ///< 1 - exp(-dt / tau_mag)
+    Quat q = Quat::Identity();            ///< sensor-to-earth
+    double gain_dt_s = -1.0;              ///< step for which gain_acc and gain_mag hold (dt rarely changes), s
+    double gain_acc = 0.0;                ///< 1 - exp(-dt / tau_acc)
+    double gain_mag = 0.0;                ///< 1 - exp(-dt / tau_mag)
+    RestDetector rest;                    ///< still-sensor detection (flags().resting, the bias updates' gate)
+    GyroBiasLowPass bias_lowpass;         ///< the gyro bias estimate at rest
+    MagDisturbanceDetector mag_detector;  ///< magnetometer rejection
     FilterFlags flags;
   };
 
@@ -84,30 +87,27 @@ class ComplementaryFilter final : public OrientationFilter {
 
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return bias_.bias(); }  // zero without the low-pass
+  Vec3 gyro_bias() const override { return state_.bias_lowpass.bias(); }  // zero without the low-pass
   std::string_view name() const override { return "complementary"; }
 
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
   /// The magnetic-disturbance detector's state (reference field, low-passed |m| and dip, rejection budget).
-  const MagDisturbanceDetector& mag_detector() const { return mag_detector_; }
+  const MagDisturbanceDetector& mag_detector() const { return state_.mag_detector; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
-  void clear() override {
-    state_ = State{};
-    rest_.reset();
-    bias_.reset();
-    mag_detector_.reset();
-  }
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
+  void clear() override { state_ = initial_; }
 
   Params params_;
   Coefficients coeff_;
   State state_;
-  RestDetector rest_;
-  GyroBiasLowPass bias_;
-  MagDisturbanceDetector mag_detector_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entry: "complementary" with the Params fields as parameter names.

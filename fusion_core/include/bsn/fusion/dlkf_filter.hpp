@@ -110,6 +110,9 @@ class DlkfFilter final : public OrientationFilter {
     Quat q = Quat::Identity();             ///< TRIAD result, sensor-to-earth
     Vec3 gyr_prev = Vec3::Zero();
     bool have_gyr_prev = false;
+    RestDetector rest;             ///< still-sensor detection (flags().resting, the bias updates' gate)
+    GyroBiasLowPass bias_lowpass;  ///< the gyro bias estimate at rest
+    MagneticRAdaption r_adaption;  ///< magnetometer variance by its disturbance
     FilterFlags flags;
     double decay_dt = -1.0;   ///< the step the two decay factors below were computed for, s (cache)
     double decay_ext = 0.0;   ///< exp(-dt / tau_ext_acc)
@@ -121,7 +124,7 @@ class DlkfFilter final : public OrientationFilter {
 
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return bias_.bias(); }
+  Vec3 gyro_bias() const override { return state_.bias_lowpass.bias(); }
   std::string_view name() const override { return "dlkf"; }
 
   /// Covariances of the two linear filters: [g_S, a_S] and [h_S, d_S].
@@ -129,6 +132,8 @@ class DlkfFilter final : public OrientationFilter {
   const dlkf::Mat6& magnetic_covariance() const { return state_.magnetic.p; }
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
 
   /// TRIAD (Fan eqs. 1-3) with gravity dominant: the sensor-to-earth orientation whose earth z is along `up`
   /// (sensor frame) and whose earth y is along the horizontal part of `field`. Requires them not parallel.
@@ -137,6 +142,8 @@ class DlkfFilter final : public OrientationFilter {
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
   /// Clears everything but the bias low-pass.
   void restart_keeping_bias();
@@ -144,10 +151,8 @@ class DlkfFilter final : public OrientationFilter {
 
   Params params_;
   Coefficients coeff_;
-  GyroBiasLowPass bias_;
-  MagneticRAdaption r_adaption_;
-  RestDetector rest_;
   State state_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 std::unique_ptr<OrientationFilter> make_dlkf_filter(const FilterSpec& spec);

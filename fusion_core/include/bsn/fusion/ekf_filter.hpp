@@ -56,7 +56,7 @@ class EkfFilter final : public OrientationFilter {
     /// 2.40 deg, 2 2.42, 4 2.44, 6 2.45, 10 2.46, uncapped 3.90; the simulated case, mean of seeds 13-18: 2.20,
     /// 1.54, 1.11, 0.97, 0.88, 0.84 deg RMS heading (a fixed sigma_a of 4: 2.50 deg on BROAD, 1.97 simulated).
     double acc_variance_cap = 2.0;
-    /// 1 = while the rest detector reports rest (rest_* parameters), the raw gyro reading is a measurement of the
+    /// 1 = while the rest detector reports rest (state_.rest* parameters), the raw gyro reading is a measurement of the
     /// bias on all three axes (the true rate is zero; earth rotation, 0.004 deg/s, is far below a MEMS bias): a
     /// zero-rate update with the filter's own gyro noise per sample, sigma_g^2 / dt, as its variance. 0 = Fan's
     /// filter, which sees the bias only through the accelerometer and the magnetometer. Without it the bias along the
@@ -86,6 +86,8 @@ class EkfFilter final : public OrientationFilter {
     MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
     Vec3 gyr_prev = Vec3::Zero();               ///< raw gyro reading of the previous sample, rad/s
     bool have_gyr_prev = false;
+    RestDetector rest;             ///< still-sensor detection (flags().resting, the bias updates' gate)
+    MagneticRAdaption r_adaption;  ///< magnetometer variance by its disturbance
     FilterFlags flags;
   };
 
@@ -104,10 +106,14 @@ class EkfFilter final : public OrientationFilter {
   Mat6 error_covariance() const;
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
   void set_reference(const Vec3& mag_earth);
   /// The zero-rate update of rest_bias_update, out of line: it runs at rest only, and inlined into step() it costs
@@ -122,9 +128,8 @@ class EkfFilter final : public OrientationFilter {
 
   Params params_;
   Coefficients coeff_;
-  MagneticRAdaption r_adaption_;
-  RestDetector rest_;
   State state_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 std::unique_ptr<OrientationFilter> make_ekf_filter(const FilterSpec& spec);

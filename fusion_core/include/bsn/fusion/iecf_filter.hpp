@@ -46,9 +46,12 @@ class IecfFilter final : public OrientationFilter {
   };
 
   struct State {
-    Quat q = Quat::Identity();      ///< sensor-to-earth
-    bool heading_known = false;     ///< false after an initialisation without magnetometer
-    std::uint64_t last_mag_ns = 0;  ///< last used magnetometer reading
+    Quat q = Quat::Identity();            ///< sensor-to-earth
+    bool heading_known = false;           ///< false after an initialisation without magnetometer
+    std::uint64_t last_mag_ns = 0;        ///< last used magnetometer reading
+    RestDetector rest;                    ///< still-sensor detection (flags().resting, the bias updates' gate)
+    GyroBiasLowPass bias_lowpass;         ///< the gyro bias estimate at rest
+    MagDisturbanceDetector mag_detector;  ///< magnetometer rejection
     FilterFlags flags;
   };
 
@@ -61,24 +64,26 @@ class IecfFilter final : public OrientationFilter {
 
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return bias_.bias(); }
+  Vec3 gyro_bias() const override { return state_.bias_lowpass.bias(); }
   std::string_view name() const override { return use_magnetometer_ ? "iecf" : "iecf6"; }
 
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
 
   Params params_;
   bool use_magnetometer_;
   Coefficients coeff_;
   State state_;
-  RestDetector rest_;
-  GyroBiasLowPass bias_;
-  MagDisturbanceDetector mag_detector_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "iecf" (9D) and "iecf6" (6D), with the Params fields as parameter names.

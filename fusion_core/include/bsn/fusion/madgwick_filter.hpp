@@ -49,6 +49,8 @@ class MadgwickFilter final : public OrientationFilter {
     Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, uT; turned into the current sensor frame
                                     ///< while a sample without magnetometer uses it
     std::uint64_t held_mag_ns = 0;  ///< its timestamp; 0 = none
+    RestDetector rest;              ///< still-sensor detection (flags().resting, the bias updates' gate)
+    GyroBiasLowPass bias_lowpass;   ///< the gyro bias estimate at rest
     FilterFlags flags;
   };
 
@@ -69,23 +71,26 @@ class MadgwickFilter final : public OrientationFilter {
 
   Quat orientation() const override { return state_.q; }
   FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return bias_.bias(); }
+  Vec3 gyro_bias() const override { return state_.bias_lowpass.bias(); }
   std::string_view name() const override { return use_magnetometer_ ? "madgwick" : "madgwick6"; }
 
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
 
   Params params_;
   bool use_magnetometer_;
   Coefficients coeff_;
   State state_;
-  RestDetector rest_;
-  GyroBiasLowPass bias_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "madgwick" (9D) and "madgwick6" (6D), with the Params fields as parameter names.

@@ -136,6 +136,14 @@ class MagDisturbanceDetector {
     double mag_reduced_gain = 0.5;
   };
 
+  /// Bounds of the two bands for the current reference: |m| in uT, and sin(dip) (2 or -2 where the angle
+  /// bound lies beyond +-90 deg, so that the comparison always or never holds as it would for the angle).
+  /// Derived from the reference whenever it moves, so they belong to the state.
+  struct Bounds {
+    double norm_enter_low = 0.0, norm_enter_high = 0.0, norm_leave_low = 0.0, norm_leave_high = 0.0;
+    double sin_enter_low = 0.0, sin_enter_high = 0.0, sin_leave_low = 0.0, sin_leave_high = 0.0;
+  };
+
   struct State {
     bool reference_known = false;
     double ref_norm = 0.0;          ///< reference |m|, uT
@@ -160,6 +168,7 @@ class MagDisturbanceDetector {
     double candidate_dip = 0.0;         ///< rad
     std::uint64_t candidate_since_ns = 0;
     bool candidate = false;  ///< a candidate is being timed
+    Bounds bounds;           ///< of the current reference
   };
 
   /// Throws std::invalid_argument on a non-positive or non-finite parameter, or a leave threshold above its
@@ -195,15 +204,9 @@ class MagDisturbanceDetector {
   const Params& params() const { return params_; }
   void reset() { state_ = State{}; }
   const State& state() const { return state_; }
+  void set_state(const State& state) { state_ = state; }
 
  private:
-  /// Bounds of the two bands for the current reference: |m| in uT, and sin(dip) (2 or -2 where the angle
-  /// bound lies beyond +-90 deg, so that the comparison always or never holds as it would for the angle).
-  struct Bounds {
-    double norm_enter_low = 0.0, norm_enter_high = 0.0, norm_leave_low = 0.0, norm_leave_high = 0.0;
-    double sin_enter_low = 0.0, sin_enter_high = 0.0, sin_leave_low = 0.0, sin_leave_high = 0.0;
-  };
-
   /// The reference from its magnitude and the sine of its dip, and the bands' bounds derived without trigonometry
   /// (what the clean field's following moves; the public setters also restart that averaging).
   void set_reference_bounds(double norm_uT, double sin_dip);
@@ -215,7 +218,6 @@ class MagDisturbanceDetector {
   std::uint64_t max_rejection_ns_ = 0;
   double sin_enter_ = 0.0, cos_enter_ = 1.0, sin_leave_ = 0.0, cos_leave_ = 1.0;  ///< of the dip thresholds
   bool enter_beyond_pi_ = false, leave_beyond_pi_ = false;                        ///< a dip threshold >= pi: never out
-  Bounds bounds_;
   State state_;
 };
 

@@ -109,7 +109,7 @@ class MekfFilter final : public OrientationFilter {
     double sigma_bg = 0.0;
     double sigma_a = 0.0;
     double sigma_m = 0.0;
-    /// 1 = while the rest detector reports rest (rest_* parameters), the raw gyro reading is a measurement of the
+    /// 1 = while the rest detector reports rest (state_.rest* parameters), the raw gyro reading is a measurement of the
     /// bias on all three axes (the true rate is zero; earth rotation, 0.004 deg/s, is far below a MEMS bias): a
     /// zero-rate update with the set's gyro noise per sample, sigma_g^2 / dt, as its variance. 0 = Nez's filter,
     /// in which only the accelerometer corrects the bias (Suh's magnetometer step leaves it alone), so the bias along
@@ -203,6 +203,8 @@ class MekfFilter final : public OrientationFilter {
     bool differing = false;                ///< the intensity currently differs from the set in use
     std::uint64_t differing_since_ns = 0;  ///< since when
     int differing_max = 0;                 ///< highest class seen since then
+    RestDetector rest;                     ///< still-sensor detection (flags().resting, the bias updates' gate)
+    MagneticRAdaption r_adaption;          ///< magnetometer variance by its disturbance
     FilterFlags flags;
   };
 
@@ -225,10 +227,14 @@ class MekfFilter final : public OrientationFilter {
   MekfNoise noise() const;
   const Params& params() const { return params_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
   void set_reference(const Vec3& mag_earth);
   int classify(const ImuSample& s) const;
@@ -241,9 +247,8 @@ class MekfFilter final : public OrientationFilter {
   Params params_;
   bool adaptive_;
   Coefficients coeff_;
-  MagneticRAdaption r_adaption_;
-  RestDetector rest_;
   State state_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "mekf" (fixed set) and "mekf_adaptive", with the Params fields as parameter names (the sets' as

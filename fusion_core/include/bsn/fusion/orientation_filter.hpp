@@ -38,6 +38,19 @@ struct FilterClock {
   std::uint64_t init_ns = 0;  ///< timestamp of the last (re)initialisation
 };
 
+/// A saved filter state, opaque: OrientationFilter::save() makes one, restore() takes it back into a filter of the
+/// same name and parameters.
+class FilterSnapshot {
+ public:
+  virtual ~FilterSnapshot() = default;
+  std::string_view filter() const { return filter_; }  ///< the registered name of the filter it was saved from
+
+ private:
+  friend class OrientationFilter;
+  std::string_view filter_;
+  FilterClock clock_;
+};
+
 class OrientationFilter {
  public:
   virtual ~OrientationFilter() = default;
@@ -83,6 +96,14 @@ class OrientationFilter {
     clear();
   }
 
+  /// Everything the filter keeps between samples (its clock and its State, the components in it included), copied;
+  /// allocates once, never touched by update().
+  std::unique_ptr<FilterSnapshot> save() const;
+  /// Puts a saved state back: the filter then continues bit for bit as the one it was saved from, provided both were
+  /// made with the same parameters (which a State does not carry). Throws std::invalid_argument for a snapshot of
+  /// another filter.
+  void restore(const FilterSnapshot& snapshot);
+
   /// Registered name, e.g. "complementary".
   virtual std::string_view name() const = 0;
 
@@ -101,6 +122,24 @@ class OrientationFilter {
   virtual UpdateResult step(const ImuSample& sample, double dt_s) = 0;
   /// Clears the filter's own state, the gyro bias estimate included (reset()).
   virtual void clear() = 0;
+
+  /// The filter's State in a snapshot (save()), and back (restore(); the snapshot is of this filter's class).
+  virtual std::unique_ptr<FilterSnapshot> save_state() const = 0;
+  virtual void restore_state(const FilterSnapshot& snapshot) = 0;
+  /// The snapshot of a State, and the State of a snapshot made by state_snapshot<State>.
+  template <class State>
+  struct StateSnapshot final : FilterSnapshot {
+    explicit StateSnapshot(const State& s) : state(s) {}
+    State state;
+  };
+  template <class State>
+  static std::unique_ptr<FilterSnapshot> state_snapshot(const State& state) {
+    return std::make_unique<StateSnapshot<State>>(state);
+  }
+  template <class State>
+  static const State& snapshot_state(const FilterSnapshot& snapshot) {
+    return static_cast<const StateSnapshot<State>&>(snapshot).state;
+  }
 
   /// True within init_period_s of the last (re)initialisation.
   bool within_init_period(std::uint64_t t_ns) const { return t_ns - clock_.init_ns < init_period_ns_; }

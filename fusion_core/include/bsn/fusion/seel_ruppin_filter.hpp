@@ -107,6 +107,9 @@ class SeelRuppinFilter final : public OrientationFilter {
     double mag_norm_sum = 0.0;  ///< uT, over the readings of the learning period
     double mag_dip_sum = 0.0;   ///< rad
     double mag_learning_count = 0.0;
+    RestDetector rest;                    ///< still-sensor detection (flags().resting, the bias updates' gate)
+    GyroBiasLowPass bias_lowpass;         ///< the rest bias low-pass (rest_bias_lowpass), seeded from gyro_bias
+    MagDisturbanceDetector mag_detector;  ///< magnetometer rejection
     FilterFlags flags;
   };
 
@@ -125,10 +128,14 @@ class SeelRuppinFilter final : public OrientationFilter {
   const Params& params() const { return params_; }
   const Coefficients& coefficients() const { return coeff_; }
   const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
+  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
   /// The rotation vector of eq. 10 (k alpha times the axis), for the earth vertical r_acc in sensor coordinates.
   Vec3 acc_correction(const Vec3& acc, const Vec3& r_acc, double dt);
@@ -157,14 +164,13 @@ class SeelRuppinFilter final : public OrientationFilter {
   };
   Vec3 lowpass_acc(const Vec3& acc, double dt);
 
+  // Caches of functions of dt alone, recomputed when dt changes: not state (a restored filter recomputes them).
   GainCache acc_gain_;
   LowPassCache acc_lp_;
   GainCache mag_gain_;
   GainCache start_mag_gain_;
   State state_;
-  RestDetector rest_;
-  MagDisturbanceDetector mag_detector_;
-  GyroBiasLowPass rest_bias_;
+  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "seel_ruppin" (9D) and "seel_ruppin6" (6D), with the Params fields as parameter names.
