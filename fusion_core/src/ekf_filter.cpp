@@ -181,6 +181,18 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   const ImuSample& s = s_fwd;
   state_.flags.reinitialised = false;
 
+  predict(s, dt);
+  state_.flags.resting = state_.rest.update(s);
+  if (state_.flags.resting && params_.rest_bias_update != 0.0) learn_bias_at_rest(s.gyr, dt);
+  const MagnetometerUse mag = judge_magnetometer(s, dt);
+  update_accelerometer_and_magnetometer(s, mag);
+  project_covariance_to_unit_norm();
+
+  state_.flags.initialising = within_init_period(s.timestamp_ns);
+  return UpdateResult::kUpdated;
+}
+
+void EkfFilter::predict(const ImuSample& s, double dt) {
   // Prediction: q <- q (x) exp(w dt), b random walk; F and Q linearised at the new estimate. w is the mean of the
   // previous and the current bias-corrected rate: second-order accurate, where the current rate alone leaves an
   // apparent bias of half the angular acceleration times dt.
@@ -215,17 +227,15 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
     state_.p.bottomLeftCorner<3, 4>() = top_right.transpose();
     state_.p.bottomRightCorner<3, 3>().diagonal().array() += params_.sigma_bg * params_.sigma_bg * dt;
   }
+}
 
-  state_.flags.resting = state_.rest.update(s);
-  if (state_.flags.resting && params_.rest_bias_update != 0.0) learn_bias_at_rest(s.gyr, dt);
-
+EkfFilter::MagnetometerUse EkfFilter::judge_magnetometer(const ImuSample& s, double dt) {
   // Magnetometer: usable unless the R-adaption sets its variance to infinity.
-  bool use_mag = false;
-  double mag_variance_factor = 1.0;  // > 1 for a field used after a long rejection (RejectionBudget)
+  MagnetometerUse m;
   state_.flags.mag_rejected = false;
   // One rotation matrix for every earth-to-sensor rotation below: its transpose maps earth to sensor.
-  Mat3 to_sensor = state_.q.toRotationMatrix().transpose();
-  Vec3 up = to_sensor.col(2);
+  m.to_sensor = state_.q.toRotationMatrix().transpose();
+  Vec3 up = m.to_sensor.col(2);
   if (s.has_mag) {
     if (state_.h_ref.isZero()) {
       // Initialised without a magnetometer: the first usable one sets the heading and the reference.
@@ -234,22 +244,30 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
         state_.q =
             (Quat(Eigen::AngleAxisd(std::atan2(m_earth.x(), m_earth.y()), Vec3::UnitZ())) * state_.q).normalized();
         set_reference(state_.q * s.mag);
-        to_sensor = state_.q.toRotationMatrix().transpose();
-        up = to_sensor.col(2);
+        m.to_sensor = state_.q.toRotationMatrix().transpose();
+        up = m.to_sensor.col(2);
       } else {
         state_.flags.mag_rejected = true;
       }
     } else {
-      use_mag = true;
+      m.use = true;
       if (params_.mag_rejection != 0.0) {
         const double rate = s.has_gyr ? (s.gyr - state_.bias).cross(up).norm() : 0.0;  // horizontal rate
         const double scale = state_.r_adaption.update(s.timestamp_ns, s.mag, up, state_.h_ref_judged, rate, dt);
-        use_mag = std::isfinite(scale);
-        if (use_mag) mag_variance_factor = scale;
-        state_.flags.mag_rejected = !use_mag;
+        m.use = std::isfinite(scale);
+        if (m.use) m.variance_factor = scale;
+        state_.flags.mag_rejected = !m.use;
       }
     }
   }
+  return m;
+}
+
+void EkfFilter::update_accelerometer_and_magnetometer(const ImuSample& s, const MagnetometerUse& mag) {
+  const bool use_mag = mag.use;
+  const double mag_variance_factor = mag.variance_factor;
+  const Mat3& to_sensor = mag.to_sensor;
+  const Vec3 up = to_sensor.col(2);
   const bool use_acc = s.has_acc && s.acc.squaredNorm() > 1e-12;
   const Vec3 g_earth(0.0, 0.0, kGravity);
   // The accelerometer's variance counts the external acceleration its residual shows, up to the cap.
@@ -292,7 +310,9 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   } else {
     state_.q = kalman_support::unit(state_.q);
   }
+}
 
+void EkfFilter::project_covariance_to_unit_norm() {
   // The norm is not a degree of freedom: project the covariance onto the tangent space of the unit sphere,
   // J = diag(I - q q^T, I). With a = A q: J A J = A - q a^T - a q^T + (q^T a) q q^T, and J B = B - q (q^T B).
   const Eigen::Vector4d qv = as_vector(state_.q);
@@ -304,9 +324,6 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   state_.p.topRightCorner<4, 3>() -= qv * qb;
   state_.p.bottomLeftCorner<3, 4>() = state_.p.topRightCorner<4, 3>().transpose();
   kalman_support::condition_covariance(state_.p, 1e-18, 1e6);
-
-  state_.flags.initialising = within_init_period(s.timestamp_ns);
-  return UpdateResult::kUpdated;
 }
 
 std::unique_ptr<OrientationFilter> make_ekf_filter(const FilterSpec& spec) {

@@ -115,6 +115,19 @@ class EkfFilter final : public OrientationFilter {
   std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
   void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
   void clear() override;
+  /// What judge_magnetometer() decided for the sample, and the earth-to-sensor rotation after it (which may have
+  /// set the heading).
+  struct MagnetometerUse {
+    bool use = false;
+    double variance_factor = 1.0;  ///< > 1 for a field used after a long rejection (RejectionBudget)
+    Eigen::Matrix3d to_sensor = Eigen::Matrix3d::Identity();
+  };
+  /// step(): the prediction with the gyro, the magnetometer's judgement (and the first heading of a start without
+  /// it), the joint or single-sensor correction, the covariance's projection onto the unit quaternions.
+  void predict(const ImuSample& s, double dt);
+  MagnetometerUse judge_magnetometer(const ImuSample& s, double dt);
+  void update_accelerometer_and_magnetometer(const ImuSample& s, const MagnetometerUse& mag);
+  void project_covariance_to_unit_norm();
   void set_reference(const Vec3& mag_earth);
   /// The zero-rate update of rest_bias_update, out of line: it runs at rest only, and inlined into step() it costs
   /// the update in motion instructions (ekf: +1.3 %).
