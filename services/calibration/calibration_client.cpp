@@ -104,7 +104,7 @@ void print_result(const bsn::CalibrationResult& r) {
 int run_live_calibration(const LiveCalibrationOptions& opt) {
   const std::optional<calib::CalibrationKind> kind = calib::parse_kind(opt.kind);
   if (!kind) {
-    std::fprintf(stderr, "bsn calibrate: unknown --kind '%s' (magnetometer, gyro-bias, accelerometer)\n",
+    std::fprintf(stderr, "bsn calibrate: unknown --kind '%s' (magnetometer, gyro-bias, accelerometer, alignment)\n",
                  opt.kind.c_str());
     return 2;
   }

@@ -12,12 +12,14 @@
 #include <unordered_map>
 #include <vector>
 
+#include "alignment_nodes.hpp"
 #include "bsn/calib/alignment_session.hpp"
 #include "bsn/calib/calibration_session.hpp"
 #include "bsn/dds/participant.hpp"
 #include "bsn/fusion/body_model.hpp"
 #include "bsn/fusion/imu_sample.hpp"
 #include "calibration_store.hpp"
+#include "calibration_wire.hpp"
 #include "command.hpp"
 
 namespace bsn::services {
@@ -88,19 +90,6 @@ class CalibrationService {
   std::unique_ptr<dds::Reader<bsn::RawSample>> raw_reader_;
   std::unique_ptr<dds::Reader<bsn::CalibrationRequest>> request_reader_;
 };
-
-/// The alignment's nodes of `body`: those named in `wanted` (every node of the body when empty), parents before
-/// children; `flexion_sign` from the joint's type (knee -1, hip and ankle +1, others 0). On a node of no segment
-/// `problem` says so and the result is empty.
-std::vector<calib::AlignmentNode> alignment_nodes(const fusion::BodyModel& body, const std::vector<std::string>& wanted,
-                                                  std::string& problem);
-
-/// A sample of the calibration sessions from a fusion-core sample (live from bsn/raw, or from a recording).
-calib::SessionSample session_sample(const fusion::ImuSample& imu, std::uint64_t seq);
-
-/// The wire kind of a core kind and back (nullopt for a value outside the enum, e.g. from another vendor).
-bsn::CalibrationKind to_wire(calib::CalibrationKind kind);
-std::optional<calib::CalibrationKind> from_wire(bsn::CalibrationKind kind);
 
 /// `bsn calibration`: its options and what runs it.
 Command calibration_command();

@@ -4,6 +4,7 @@
 #include <numbers>
 
 #include "bsn/logging/log.hpp"
+#include "calibration_wire.hpp"
 
 namespace bsn::services {
 namespace {
@@ -25,18 +26,10 @@ std::string text(const std::string& s) { return logging::printable(s); }
 
 double seconds(std::uint64_t ns) { return static_cast<double>(ns) * 1e-9; }
 
+// The calibration service's names (kind_name of calib_core), the spelling of --kind and of the store's files.
 const char* kind_name(bsn::CalibrationKind k) {
-  switch (k) {
-    case bsn::CALIBRATION_MAGNETOMETER:
-      return "magnetometer";
-    case bsn::CALIBRATION_GYRO_BIAS:
-      return "gyro_bias";
-    case bsn::CALIBRATION_ACCELEROMETER:
-      return "accelerometer";
-    case bsn::CALIBRATION_SEGMENT_ALIGNMENT:
-      return "alignment";
-  }
-  return "unknown";
+  const std::optional<calib::CalibrationKind> kind = from_wire(k);
+  return kind ? calib::kind_name(*kind) : "unknown";
 }
 
 }  // namespace

@@ -7,7 +7,7 @@
 #include <filesystem>
 #include <fstream>
 
-#include "calibration_service.hpp"
+#include "alignment_nodes.hpp"
 #include "calibration_store.hpp"
 
 namespace bsn::services {

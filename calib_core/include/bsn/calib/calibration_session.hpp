@@ -25,7 +25,7 @@ enum class CalibrationKind {
 /// "magnetometer", "gyro-bias", "accelerometer", "alignment": the names of the client's --kind and of the store's
 /// files.
 const char* kind_name(CalibrationKind kind);
-/// The kind of a name (kind_name's, or "gyro_bias"), nullopt if unknown.
+/// The kind of a name (kind_name's; "gyro_bias", the enumerator's spelling, is taken too), nullopt if unknown.
 std::optional<CalibrationKind> parse_kind(std::string_view name);
 
 /// What decides when a collection ends and when its data are good enough.
