@@ -498,14 +498,23 @@ std::string detect_format(const std::string& path) {
 }
 
 std::vector<ImportedNode> import_recordings(const std::string& path, const std::string& format,
-                                            const ImportOptions& options) {
+                                            const ImportOptions& options,
+                                            const std::function<bool(const std::string&)>& wanted,
+                                            std::vector<std::string>* left_out) {
+  auto refused = [&](const std::string& name, const std::string& what) {
+    if (!wanted || wanted(name)) return false;
+    if (left_out) left_out->push_back(what);
+    return true;
+  };
   const std::string detected = format == "auto" ? detect_format(path) : format;
   std::error_code ec;
   const bool folder = fs::is_directory(path, ec);
   std::vector<ImportedNode> nodes;
   if (!folder || detected == "diodem") {
     if (detected == "folder") throw std::logic_error("detect_format gave folder for a file");
-    nodes = recording_importer(detected).read(path, options);
+    for (ImportedNode& n : recording_importer(detected).read(path, options)) {
+      if (!refused(n.name, path + " (" + n.name + ")")) nodes.push_back(std::move(n));
+    }
   } else {
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(path)) {
@@ -520,6 +529,7 @@ std::vector<ImportedNode> import_recordings(const std::string& path, const std::
       const RecordingImporter* importer = fixed;
       if (!importer) importer = &recording_importer(detect_format(f.string()));
       if (fixed && hdf5 != (fixed == &kBroad)) continue;  // another format's file
+      if (refused(f.stem().string(), f.string())) continue;
       for (ImportedNode& n : importer->read(f.string(), options)) nodes.push_back(std::move(n));
     }
   }

@@ -4,6 +4,7 @@
 // Formats, units and frames: docs/importers.md.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -49,8 +50,11 @@ std::string detect_format(const std::string& path);
 
 /// Reads an input: a file (one node, or a DIODEM trial), a DIODEM trial folder, or a folder of per-node files (each
 /// in its own format under "auto", else all in `format`; files of other extensions are left out). Nodes come sorted
-/// by name; two of one name are a FormatError.
+/// by name; two of one name are a FormatError. With `wanted`, a node (or a folder's file, by its stem) it refuses is
+/// not read, and listed in `left_out` if given.
 std::vector<ImportedNode> import_recordings(const std::string& path, const std::string& format,
-                                            const ImportOptions& options);
+                                            const ImportOptions& options,
+                                            const std::function<bool(const std::string&)>& wanted = {},
+                                            std::vector<std::string>* left_out = nullptr);
 
 }  // namespace bsn::io
