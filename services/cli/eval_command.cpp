@@ -40,6 +40,10 @@ std::string default_scenario_dir() {
 namespace fs = std::filesystem;
 
 int run_eval(const EvalOptions& opt) {
+  if (opt.body_path.empty() && (opt.format != "auto" || !opt.units.empty() || opt.imu != "rigid")) {
+    std::fprintf(stderr, "bsn eval: error: --format, --unit and --imu go with --body (the importers' options)\n");
+    return 2;
+  }
   if (!opt.body_path.empty()) {
     if (opt.inputs.size() != 1) {
       std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");

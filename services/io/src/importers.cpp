@@ -277,16 +277,20 @@ std::vector<ImportedNode> diodem_nodes(const Table& imu, const std::string& imu_
         if (q_table == &imu) {
           ok = table_quat(imu, s, i, q);
         } else {
-          const double f = static_cast<double>(i) / imu.rate_hz * omc->rate_hz;
-          const auto k = static_cast<std::size_t>(std::floor(f));
+          // The optical sample index of IMU sample i; within 1e-9 of an integer it is that sample (equal rates).
+          double f = static_cast<double>(i) * omc->rate_hz / imu.rate_hz;
+          if (std::abs(f - std::round(f)) < 1e-9) f = std::round(f);
+          const auto k = static_cast<std::size_t>(f);
           const double frac = f - static_cast<double>(k);
           Eigen::Quaterniond q0, q1;
           if (k < omc->rows() && table_quat(*omc, s, k, q0)) {
-            if (frac < 1e-9) {
+            if (frac == 0.0) {
               q = q0;
               ok = true;
             } else if (k + 1 < omc->rows() && table_quat(*omc, s, k + 1, q1)) {
               q = q0.slerp(frac, q1).normalized();
+              // The sign of the nearer optical sample (slerp takes the shorter way, which may flip it).
+              if (q.dot(frac < 0.5 ? q0 : q1) < 0.0) q.coeffs() = -q.coeffs();
               ok = true;
             }
           }

@@ -8,7 +8,10 @@
 #include <filesystem>
 #include <fstream>
 #include <numbers>
+#include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "bsn/io/importers.hpp"
 
@@ -216,6 +219,94 @@ TEST(DiodemImport, MalformedFilesNameFileAndLine) {
                       "t.csv: fewer than two samples");
   TempDir dir;
   expect_format_error([&] { import_recordings(dir.path(), "diodem", {}); }, "no *_imu_rigid.csv file");
+}
+
+/// Writes `segs` (each with a reference) as a DIODEM trial: IMU and optical files at the same rate, 17 digits.
+void write_diodem(const TempDir& dir, const std::vector<std::pair<std::string, Recording>>& segs) {
+  std::ostringstream imu, omc;
+  imu << "sampling frequency: " << segs[0].second.sampling_rate_hz << "\nunits\n";
+  omc << "sampling frequency: " << segs[0].second.sampling_rate_hz << "\nunits\n";
+  std::string ih, oh;
+  for (const auto& [name, r] : segs) {
+    for (const char* q : {"acc", "gyr", "mag"})
+      for (const char* a : {"x", "y", "z"}) ih += (ih.empty() ? "" : ",") + name + "_" + q + "_" + a;
+    for (const char* a : {"w", "x", "y", "z"}) oh += (oh.empty() ? "" : ",") + name + "_quat_" + a;
+  }
+  imu << ih << "\n";
+  omc << oh << "\n";
+  imu.precision(17);
+  omc.precision(17);
+  for (Eigen::Index i = 0; i < segs[0].second.gyr.rows(); ++i) {
+    bool first = true;
+    for (const auto& [name, r] : segs) {
+      for (int a = 0; a < 3; ++a) imu << (first ? "" : ",") << r.acc(i, a), first = false;
+      for (int a = 0; a < 3; ++a) imu << "," << r.gyr(i, a);
+      for (int a = 0; a < 3; ++a) imu << "," << r.mag(i, a) / 40.0;
+    }
+    imu << "\n";
+    first = true;
+    for (const auto& [name, r] : segs) {
+      for (int a = 0; a < 4; ++a) omc << (first ? "" : ",") << r.opt_quat(i, a), first = false;
+    }
+    omc << "\n";
+  }
+  dir.write("exp02_motion03_imu_rigid.csv", imu.str());
+  dir.write("exp02_motion03_omc.csv", omc.str());
+}
+
+TEST(DiodemImport, ARecordingWrittenInTheLayoutReadsBack) {
+  std::srand(7);
+  std::vector<std::pair<std::string, Recording>> segs;
+  for (const char* name : {"seg1", "seg4"}) {
+    Recording r;
+    r.sampling_rate_hz = 100.0;
+    r.acc = RowsX3::Random(50, 3) * 20.0;
+    r.gyr = RowsX3::Random(50, 3) * 10.0;
+    r.mag = RowsX3::Random(50, 3) * 60.0;
+    r.opt_quat.resize(50, 4);
+    for (Eigen::Index i = 0; i < 50; ++i) {
+      const Eigen::Quaterniond q = Eigen::Quaterniond::UnitRandom();
+      r.opt_quat.row(i) << q.w(), q.x(), q.y(), q.z();
+    }
+    segs.emplace_back(name, r);
+  }
+  TempDir dir;
+  write_diodem(dir, segs);
+  const auto nodes = import_recordings(dir.path(), "auto", {});
+  ASSERT_EQ(nodes.size(), 2u);
+  for (std::size_t k = 0; k < 2; ++k) {
+    const Recording& want = segs[k].second;
+    const Recording& got = nodes[k].rec;
+    EXPECT_EQ(nodes[k].name, segs[k].first);
+    EXPECT_EQ(got.sampling_rate_hz, 100.0);
+    EXPECT_EQ(got.acc, want.acc);  // 17 significant digits: exact
+    EXPECT_EQ(got.gyr, want.gyr);
+    EXPECT_LT((got.mag - want.mag).cwiseAbs().maxCoeff(), 1e-12);  // through a.u. and back
+    EXPECT_LT((got.opt_quat - want.opt_quat).cwiseAbs().maxCoeff(), 1e-15);
+    EXPECT_EQ(got.time_ns(49), 490'000'000u);
+  }
+}
+
+TEST(XsensDotImport, ARecordingWrittenAsAnExportReadsBack) {
+  std::srand(11);
+  const RowsX3 acc = RowsX3::Random(30, 3) * 20.0, gyr = RowsX3::Random(30, 3) * 10.0,
+               mag = RowsX3::Random(30, 3) * 60.0;
+  std::ostringstream text;
+  text.precision(17);
+  text << "PacketCounter,SampleTimeFine,Acc_X,Acc_Y,Acc_Z,Gyr_X,Gyr_Y,Gyr_Z,Mag_X,Mag_Y,Mag_Z\n";
+  for (Eigen::Index i = 0; i < 30; ++i) {
+    text << i << "," << 1000 + 10000 * i;
+    for (int a = 0; a < 3; ++a) text << "," << acc(i, a);
+    for (int a = 0; a < 3; ++a) text << "," << gyr(i, a) / kDeg;
+    for (int a = 0; a < 3; ++a) text << "," << mag(i, a) / 40.0;
+    text << "\n";
+  }
+  const Recording r = recording_importer("xsens-dot").parse(text.str(), "n.csv", {})[0].rec;
+  EXPECT_EQ(r.acc, acc);
+  EXPECT_LT((r.gyr - gyr).cwiseAbs().maxCoeff(), 1e-13);
+  EXPECT_LT((r.mag - mag).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_NEAR(r.sampling_rate_hz, 100.0, 1e-9);
+  EXPECT_EQ(r.time_ns(29), (1000u + 10000u * 29) * 1000);
 }
 
 // ---- Xsens DOT ---------------------------------------------------------------------------------------------------
