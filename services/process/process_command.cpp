@@ -138,8 +138,8 @@ void read_session(const std::string& path, ProcessInput& in) {
 
 // Recordings (a folder of per-node files, one file, a DIODEM trial) through the importers; each node named after its
 // node or its segment in the body.
-void read_recordings(const ProcessOptions& opt, ProcessInput& in, const fusion::BodyModel& body,
-                     std::vector<std::string>& notes) {
+std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const fusion::BodyModel& body,
+                            std::vector<std::string>& notes) {
   if (opt.imu != "rigid" && opt.imu != "nonrigid")
     throw UsageError("--imu must be rigid or nonrigid, not '" + opt.imu + "'");
   io::ImportOptions import;
@@ -199,6 +199,10 @@ void read_recordings(const ProcessOptions& opt, ProcessInput& in, const fusion::
   }
   for (const std::string& what : left_out)
     notes.push_back(what + " is the recording of no node or segment of the body: left out");
+  // What was found, for the error when no segment has a recording.
+  std::string found;
+  for (const std::string& what : left_out) found += (found.empty() ? "" : ", ") + what;
+  return found;
 }
 
 // ---- Output ------------------------------------------------------------------------------------------------------
@@ -314,9 +318,10 @@ ProcessInput load_input(const ProcessOptions& opt, fusion::BodyModel& body, std:
   if (fs::exists(opt.out) && fs::equivalent(opt.out, opt.input)) throw UsageError("--out must not be the input");
 
   ProcessInput in;
+  std::string found;  // recordings of no segment
   if (!session) {
     body = load_body(opt, nullptr);
-    read_recordings(opt, in, body, notes);
+    found = read_recordings(opt, in, body, notes);
   } else {
     read_session(opt.input, in);
     body = load_body(opt, &in);
@@ -345,6 +350,11 @@ ProcessInput load_input(const ProcessOptions& opt, fusion::BodyModel& body, std:
     }
     for (auto& s : body.segments) s.filter = spec;
   }
+  // Nothing to process is a mistake (files named otherwise than the body's nodes), not an empty result.
+  if (!session && in.tracks.empty())
+    throw UsageError(opt.input + ": no recording of any node or segment of the body" +
+                     (found.empty() ? std::string(" (no recordings found)")
+                                    : " (found: " + found + "; name each after its node or segment)"));
   return in;
 }
 

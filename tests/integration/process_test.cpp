@@ -408,6 +408,11 @@ TEST_F(Process, RecordingsOfOtherSystemsGoThroughTheImporters) {
   EXPECT_NE(output("unit").find("'rpm' is not a unit of gyr"), std::string::npos) << output("unit");
   EXPECT_EQ(run("format", {"process", samples + "/xsens_dot", "--body", arm, "--out", out, "--format", "diodem"}), 2);
   EXPECT_NE(output("format").find("no *_imu_rigid.csv file"), std::string::npos) << output("format");
+  // Recordings named after no node of the body: an error naming what was found, not an empty output.
+  EXPECT_EQ(run("names", {"process", samples + "/xsens_dot", "--body", samples + "/diodem/chain.yaml", "--out", out}),
+            2);
+  EXPECT_NE(output("names").find("no recording of any node or segment of the body (found: "), std::string::npos)
+      << output("names");
   EXPECT_FALSE(std::filesystem::exists(out));
 }
 
