@@ -25,6 +25,9 @@ struct EvalOptions {
   std::string scenario_dir;          ///< where fan_a..fan_e.yaml are ("" = default_scenario_dir())
   std::string body_path;             ///< a body: score segments and joints (run_body_eval)
   std::string align_window = "all";  ///< with a body: the window of the per-segment alignment
+  std::string format = "auto";       ///< with a body: the recordings' format, units and DIODEM IMU
+  std::vector<std::string> units;
+  std::string imu = "rigid";
 };
 
 // The scenarios of this checkout when bsn runs from its build tree, else those installed beside the program
@@ -37,12 +40,26 @@ std::string default_scenario_dir() {
 namespace fs = std::filesystem;
 
 int run_eval(const EvalOptions& opt) {
+  if (opt.body_path.empty() && (opt.format != "auto" || !opt.units.empty() || opt.imu != "rigid")) {
+    std::fprintf(stderr, "bsn eval: error: --format, --unit and --imu go with --body (the importers' options)\n");
+    return 2;
+  }
   if (!opt.body_path.empty()) {
     if (opt.inputs.size() != 1) {
       std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");
       return 2;
     }
-    return run_body_eval({opt.inputs[0], opt.body_path, opt.filters, opt.align_window, opt.json, opt.plot_path});
+    BodyEvalOptions b;
+    b.input = opt.inputs[0];
+    b.body_path = opt.body_path;
+    b.filters = opt.filters;
+    b.align_window = opt.align_window;
+    b.json = opt.json;
+    b.plot_path = opt.plot_path;
+    b.format = opt.format;
+    b.units = opt.units;
+    b.imu = opt.imu;
+    return run_body_eval(b);
   }
   std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
   try {
@@ -195,6 +212,7 @@ Command eval_command() {
             cmd->add_option("--align-window", opt->align_window,
                             "with --body: per-segment constant alignment fitted over all, none or A:B (seconds)")
                 ->capture_default_str();
+            add_import_options(cmd, opt->format, opt->units, opt->imu);  // with --body
             cmd->add_option("--plot", opt->plot_path, "write an SVG image of the total error over time per filter");
             cmd->add_flag("--standard-tests", opt->standard_tests,
                           "run Fan et al. 2018's tests A-E on the simulator and print their Table 5 with grades");

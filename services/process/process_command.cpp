@@ -22,6 +22,7 @@
 #include "bsn/dds/topics.hpp"
 #include "bsn/eval/evaluation.hpp"
 #include "bsn/fusion/orientation_error.hpp"
+#include "bsn/io/importers.hpp"
 #include "bsn/io/json.hpp"
 #include "bsn/io/recording.hpp"
 #include "bsn/io/session_file.hpp"
@@ -135,31 +136,31 @@ void read_session(const std::string& path, ProcessInput& in) {
   }
 }
 
-// A folder: one recording per node, named after the node or its segment (<name>.hdf5, .h5 or .csv).
-void read_folder(const std::string& dir, ProcessInput& in, const fusion::BodyModel& body,
-                 std::vector<std::string>& notes) {
-  std::map<std::string, fs::path> files;  // by stem
-  for (const auto& entry : fs::directory_iterator(dir)) {
-    if (!entry.is_regular_file()) continue;
-    const std::string ext = entry.path().extension().string();
-    if (ext != ".hdf5" && ext != ".h5" && ext != ".csv") continue;
-    const std::string stem = entry.path().stem().string();
-    if (files.contains(stem))
-      throw UsageError(dir + ": two recordings of '" + stem + "' (" + files[stem].string() + " and " +
-                       entry.path().string() + ")");
-    files[stem] = entry.path();
-  }
-  std::vector<std::string> used;
+// Recordings (a folder of per-node files, one file, a DIODEM trial) through the importers; each node named after its
+// node or its segment in the body.
+std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const fusion::BodyModel& body,
+                            std::vector<std::string>& notes) {
+  if (opt.imu != "rigid" && opt.imu != "nonrigid")
+    throw UsageError("--imu must be rigid or nonrigid, not '" + opt.imu + "'");
+  io::ImportOptions import;
+  import.imu = opt.imu;
+  for (const std::string& u : opt.units) io::add_unit_option(import.units, u);
+  auto wanted = [&](const std::string& name) {
+    return std::any_of(body.segments.begin(), body.segments.end(),
+                       [&](const fusion::SegmentSpec& s) { return s.node == name || s.name == name; });
+  };
+  std::vector<std::string> left_out;
+  std::vector<io::ImportedNode> nodes = io::import_recordings(opt.input, opt.format, import, wanted, &left_out);
   for (std::size_t i = 0; i < body.segments.size(); ++i) {
     const fusion::SegmentSpec& spec = body.segments[i];
-    auto it = files.find(spec.node);
-    if (it == files.end()) it = files.find(spec.name);
-    if (it == files.end()) {
-      notes.push_back("segment '" + spec.name + "' (node '" + spec.node + "') has no recording in " + dir);
+    auto it = std::find_if(nodes.begin(), nodes.end(), [&](const io::ImportedNode& n) { return n.name == spec.node; });
+    if (it == nodes.end())
+      it = std::find_if(nodes.begin(), nodes.end(), [&](const io::ImportedNode& n) { return n.name == spec.name; });
+    if (it == nodes.end()) {
+      notes.push_back("segment '" + spec.name + "' (node '" + spec.node + "') has no recording in " + opt.input);
       continue;
     }
-    used.push_back(it->first);
-    const io::Recording rec = io::read_recording(it->second.string());
+    const io::Recording& rec = it->rec;
     NodeTrack t;
     t.node = spec.node;
     t.segment = i;
@@ -196,10 +197,12 @@ void read_folder(const std::string& dir, ProcessInput& in, const fusion::BodyMod
     t.arrival_ns = t.timestamp_ns;
     in.tracks.push_back(std::move(t));
   }
-  for (const auto& [stem, path] : files) {
-    if (std::find(used.begin(), used.end(), stem) == used.end())
-      notes.push_back(path.string() + " is the recording of no node or segment of the body: left out");
-  }
+  for (const std::string& what : left_out)
+    notes.push_back(what + " is the recording of no node or segment of the body: left out");
+  // What was found, for the error when no segment has a recording.
+  std::string found;
+  for (const std::string& what : left_out) found += (found.empty() ? "" : ", ") + what;
+  return found;
 }
 
 // ---- Output ------------------------------------------------------------------------------------------------------
@@ -308,14 +311,17 @@ ProcessInput load_input(const ProcessOptions& opt, fusion::BodyModel& body, std:
     throw UsageError("--order must be arrival or time, not '" + opt.order + "'");
   if (!fs::exists(opt.input)) throw UsageError(opt.input + ": no such file or folder");
   const bool folder = fs::is_directory(opt.input);
-  if (!folder && !io::is_session_file(opt.input))
+  const std::string ext = fs::path(opt.input).extension().string();
+  const bool session = !folder && io::is_session_file(opt.input);
+  if (!folder && !session && (ext == ".h5" || ext == ".hdf5"))
     throw UsageError(opt.input + ": not a bsn session file (bsn record) nor a folder of per-node recordings");
   if (fs::exists(opt.out) && fs::equivalent(opt.out, opt.input)) throw UsageError("--out must not be the input");
 
   ProcessInput in;
-  if (folder) {
+  std::string found;  // recordings of no segment
+  if (!session) {
     body = load_body(opt, nullptr);
-    read_folder(opt.input, in, body, notes);
+    found = read_recordings(opt, in, body, notes);
   } else {
     read_session(opt.input, in);
     body = load_body(opt, &in);
@@ -344,6 +350,11 @@ ProcessInput load_input(const ProcessOptions& opt, fusion::BodyModel& body, std:
     }
     for (auto& s : body.segments) s.filter = spec;
   }
+  // Nothing to process is a mistake (files named otherwise than the body's nodes), not an empty result.
+  if (!session && in.tracks.empty())
+    throw UsageError(opt.input + ": no recording of any node or segment of the body" +
+                     (found.empty() ? std::string(" (no recordings found)")
+                                    : " (found: " + found + "; name each after its node or segment)"));
   return in;
 }
 
@@ -497,6 +508,9 @@ int run_process(const ProcessOptions& opt) {
   } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "bsn process: error: %s\n", e.what());
     return 2;
+  } catch (const io::FormatError& e) {
+    std::fprintf(stderr, "bsn process: error: %s\n", e.what());
+    return 2;
   } catch (const io::IoError& e) {
     std::fprintf(stderr, "bsn process: error: %s\n", e.what());
     return std::string(e.what()).find("--overwrite") != std::string::npos ? 2 : 1;
@@ -506,11 +520,26 @@ int run_process(const ProcessOptions& opt) {
   }
 }
 
+void add_import_options(CLI::App* cmd, std::string& format, std::vector<std::string>& units, std::string& imu) {
+  std::string formats = "auto";
+  for (const io::RecordingImporter* i : io::recording_importers()) formats += ", " + i->name();
+  cmd->add_option("--format", format, "the recordings' format: " + formats + " (docs/importers.md)")
+      ->capture_default_str();
+  cmd->add_option("--unit", units,
+                  "QUANTITY=UNIT overriding the format's unit: acc (m/s^2, g), gyr (rad/s, deg/s), mag (uT, nT, G, "
+                  "au, au:K), time (s, ms, us, ns); repeatable");
+  cmd->add_option("--imu", imu, "DIODEM: which IMU of each segment, rigid or nonrigid")->capture_default_str();
+}
+
 Command process_command() {
   return {"process", "Run a recorded session or per-node recordings through the body pipeline, offline",
           [](CLI::App* cmd) {
             auto opt = std::make_shared<ProcessOptions>();
-            cmd->add_option("INPUT", opt->input, "session file (bsn record) or folder of <node>.hdf5/.csv")->required();
+            cmd->add_option("INPUT", opt->input,
+                            "session file (bsn record), folder of per-node recordings (<node>.hdf5/.csv), a recording "
+                            "file or a DIODEM trial")
+                ->required();
+            add_import_options(cmd, opt->format, opt->units, opt->imu);
             cmd->add_option("--body", opt->body_path, "YAML body model (default: the one recorded in the session)");
             cmd->add_option("--out", opt->out, "session file to write (.h5)")->required();
             cmd->add_flag("--overwrite", opt->overwrite, "replace an existing output file");
@@ -588,6 +617,9 @@ int body_eval(const BodyEvalOptions& opt) {
   p.input = opt.input;
   p.body_path = opt.body_path;
   p.filters = opt.filters;
+  p.format = opt.format;
+  p.units = opt.units;
+  p.imu = opt.imu;
   std::vector<std::string> notes;
   fusion::BodyModel body;
   ProcessInput in = load_input(p, body, notes);
@@ -782,6 +814,9 @@ int run_body_eval(const BodyEvalOptions& opt) {
     std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
     return 2;
   } catch (const config::ConfigError& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  } catch (const io::FormatError& e) {
     std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
     return 2;
   } catch (const io::IoError& e) {

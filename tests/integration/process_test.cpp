@@ -3,8 +3,10 @@
 // the same bytes; a folder of per-node recordings gives the simulator's motion; bad inputs are usage errors.
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <map>
 #include <numbers>
 #include <thread>
@@ -338,6 +340,80 @@ TEST_F(Process, BadInputsAreUsageErrors) {
   EXPECT_EQ(run("order", {"process", (dir() / "empty").string(), "--body", body, "--order", "random", "--out", out}),
             2);
   EXPECT_NE(output("order").find("--order must be arrival or time"), std::string::npos) << output("order");
+}
+
+// The importers' hand-made samples (deploy/samples/): segments at rest in known orientations, so the estimates and
+// the joint must be those orientations; malformed files exit 2 naming file and line.
+TEST_F(Process, RecordingsOfOtherSystemsGoThroughTheImporters) {
+  const std::string samples = std::string(BSN_DEPLOY_DIR) + "/samples";
+  // The relative orientation of a joint's last sample against its known value, degrees.
+  auto joint_error_deg = [](const std::string& session, const std::string& joint, const Eigen::Quaterniond& want) {
+    const io::SessionReader r(session);
+    for (const auto& s : r.streams_of("bsn/joint_angles")) {
+      if (s.key != joint) continue;
+      const auto q = r.read_f64(s, "quat", 4);
+      if (q.size() < 4) return 180.0;
+      const std::size_t i = q.size() - 4;
+      return Eigen::Quaterniond(q[i], q[i + 1], q[i + 2], q[i + 3]).angularDistance(want) * 180 / std::numbers::pi;
+    }
+    return 180.0;
+  };
+  ASSERT_EQ(run("diodem", {"process", samples + "/diodem", "--body", samples + "/diodem/chain.yaml", "--out",
+                           (dir() / "d.h5").string()}),
+            0)
+      << output("diodem");
+  EXPECT_LT(
+      joint_error_deg((dir() / "d.h5").string(), "hinge",
+                      Eigen::Quaterniond(Eigen::AngleAxisd(60 * std::numbers::pi / 180, Eigen::Vector3d::UnitX()))),
+      0.1);
+  ASSERT_EQ(run("eval", {"eval", "--body", samples + "/diodem/chain.yaml", samples + "/diodem"}), 0) << output("eval");
+  {
+    // The joint's line: "hinge  <relative RMS> ...", degrees.
+    const std::string text = output("eval");
+    const auto at = text.find("\nhinge ");
+    ASSERT_NE(at, std::string::npos) << text;
+    EXPECT_LT(std::stod(text.substr(at + 7, 20)), 0.01) << text;
+  }
+  ASSERT_EQ(run("dot", {"process", samples + "/xsens_dot", "--body", samples + "/xsens_dot/arm.yaml", "--out",
+                        (dir() / "x.h5").string()}),
+            0)
+      << output("dot");
+  EXPECT_LT(joint_error_deg((dir() / "x.h5").string(), "elbow",
+                            Eigen::Quaterniond(Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitX()))),
+            0.1);
+
+  // Malformed: a DOT row cut short, a DIODEM file without its rate line, an unknown unit.
+  std::filesystem::create_directories(dir() / "bad_dot");
+  for (const char* f : {"upper_arm.csv", "forearm.csv"})
+    std::filesystem::copy_file(samples + "/xsens_dot/" + f, dir() / "bad_dot" / f);
+  {
+    std::string text = read_file(dir() / "bad_dot" / "forearm.csv");
+    std::size_t at = 0;
+    for (int line = 1; line < 7; ++line) at = text.find('\n', at) + 1;
+    text.replace(at, text.find('\n', at) - at, "6,12,zz");
+    write_file(dir() / "bad_dot" / "forearm.csv", text);
+  }
+  const std::string arm = samples + "/xsens_dot/arm.yaml", out = (dir() / "o.h5").string();
+  EXPECT_EQ(run("bad_dot", {"process", (dir() / "bad_dot").string(), "--body", arm, "--out", out}), 2);
+  EXPECT_NE(output("bad_dot").find("forearm.csv:7: 3 cells, fewer than the header's columns"), std::string::npos)
+      << output("bad_dot");
+  std::filesystem::create_directories(dir() / "bad_diodem");
+  write_file(dir() / "bad_diodem" / "exp01_motion01_imu_rigid.csv", "no rate\nx\nseg1_acc_x\n");
+  EXPECT_EQ(run("bad_diodem",
+                {"process", (dir() / "bad_diodem").string(), "--body", samples + "/diodem/chain.yaml", "--out", out}),
+            2);
+  EXPECT_NE(output("bad_diodem").find("exp01_motion01_imu_rigid.csv:1: expected the sampling rate"), std::string::npos)
+      << output("bad_diodem");
+  EXPECT_EQ(run("unit", {"process", samples + "/xsens_dot", "--body", arm, "--out", out, "--unit", "gyr=rpm"}), 2);
+  EXPECT_NE(output("unit").find("'rpm' is not a unit of gyr"), std::string::npos) << output("unit");
+  EXPECT_EQ(run("format", {"process", samples + "/xsens_dot", "--body", arm, "--out", out, "--format", "diodem"}), 2);
+  EXPECT_NE(output("format").find("no *_imu_rigid.csv file"), std::string::npos) << output("format");
+  // Recordings named after no node of the body: an error naming what was found, not an empty output.
+  EXPECT_EQ(run("names", {"process", samples + "/xsens_dot", "--body", samples + "/diodem/chain.yaml", "--out", out}),
+            2);
+  EXPECT_NE(output("names").find("no recording of any node or segment of the body (found: "), std::string::npos)
+      << output("names");
+  EXPECT_FALSE(std::filesystem::exists(out));
 }
 
 }  // namespace

@@ -3,11 +3,13 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <iosfwd>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "bsn/fusion/imu_sample.hpp"
+#include "bsn/io/units.hpp"
 
 namespace bsn::io {
 
@@ -18,6 +20,13 @@ using RowsX4 = Eigen::Matrix<double, Eigen::Dynamic, 4, Eigen::RowMajor>;
 class IoError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
+};
+
+/// Malformed content in an input file (a bad cell, a missing column, a time going back): the user's input is wrong,
+/// not the machine (the commands exit 2). The message names the file and line.
+class FormatError : public IoError {
+ public:
+  using IoError::IoError;
 };
 
 /// One sensor's recording in the BROAD layout (../shared/data/broad/README.md), in the project's units.
@@ -47,15 +56,19 @@ Recording read_broad_hdf5(const std::string& path);
 /// Writes a recording in the BROAD layout; optional parts that are empty are left out.
 void write_broad_hdf5(const std::string& path, const Recording& rec);
 
-/// Reads a CSV recording. The first line is a header naming the columns, in any order:
-///   t_s or t_ns                  sample time (seconds as a decimal, or integer nanoseconds)   required
+/// Reads a CSV recording. The first line is a header naming the columns, in any order, each optionally with its unit
+/// in brackets (`acc_x [g]`, `gyr_x [deg/s]`, `t [ms]`; units.hpp lists them), else the unit below or `units`':
+///   t_s or t_ns, or t / time     sample time (seconds, integer nanoseconds, or t in a stated unit)  required
 ///   acc_x, acc_y, acc_z          m/s^2                                                         required
 ///   gyr_x, gyr_y, gyr_z          rad/s                                                         required
 ///   mag_x, mag_y, mag_z          uT; empty cells = no magnetometer sample                      optional
 ///   quat_w, quat_x, quat_y, quat_z   reference orientation, sensor-to-earth ENU                optional
 ///   movement                     0/1, where errors count                                       optional
-/// Lines starting with '#' are comments. The sampling rate is the median sample interval's inverse.
-Recording read_csv(const std::string& path);
+/// Lines starting with '#' are comments. The sampling rate is the median sample interval's inverse. A column's unit
+/// in the header and another in `units` is an error (never one silently chosen). Content errors are FormatError.
+Recording read_csv(const std::string& path, const UnitOptions& units = {});
+/// The same from a stream; `source` names it in errors.
+Recording read_csv(std::istream& in, const std::string& source, const UnitOptions& units = {});
 
 /// Reads by extension: .csv as CSV, anything else as BROAD HDF5.
 Recording read_recording(const std::string& path);
