@@ -35,14 +35,11 @@ void SensorFixedField::restart_block() {
   sum_mm_ = 0.0;
 }
 
-bool SensorFixedField::update(std::uint64_t t_ns, const Quat& q_gyr, const Vec3& mag) {
-  if (!enabled_) return false;
+bool SensorFixedField::add_row(std::uint64_t t_ns, const Quat& q_gyr, const Vec3& mag) {
   if (!in_block_ || t_ns < last_row_ns_) {
     restart_block();
     in_block_ = true;
     block_start_ns_ = t_ns;
-  } else if (t_ns - last_row_ns_ < row_ns_) {
-    return false;
   }
   last_row_ns_ = t_ns;
   const Eigen::Matrix3d r = q_gyr.toRotationMatrix();

@@ -57,7 +57,11 @@ class SensorFixedField {
   bool enabled() const { return enabled_; }
   /// One magnetometer reading `mag` (uT, sensor frame, as read: the offset not yet removed) at t_ns, with the gyro's
   /// strapdown integral q_gyr at the same time. Returns true when the offset in use changed with this reading.
-  bool update(std::uint64_t t_ns, const Quat& q_gyr, const Vec3& mag);
+  bool update(std::uint64_t t_ns, const Quat& q_gyr, const Vec3& mag) {
+    // Most readings fall between two rows: decided here, without a call.
+    if (!enabled_ || (in_block_ && t_ns >= last_row_ns_ && t_ns - last_row_ns_ < row_ns_)) return false;
+    return add_row(t_ns, q_gyr, mag);
+  }
   /// The field fixed to the sensor in use, uT, sensor frame: subtract it from a reading.
   const Vec3& offset() const { return offset_; }
   /// The earth field in q_gyr's frame that the fit which set the offset found, uT (zero before the first change).
@@ -71,6 +75,7 @@ class SensorFixedField {
   void restart_block();
 
  private:
+  bool add_row(std::uint64_t t_ns, const Quat& q_gyr, const Vec3& mag);
   void decide();
 
   bool enabled_ = false;
