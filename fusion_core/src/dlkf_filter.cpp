@@ -31,6 +31,9 @@ constexpr auto kParams =
                           {"sigma_ext_acc", &P::sigma_ext_acc},
                           {"tau_ext_acc_s", &P::tau_ext_acc_s},
                           {"acc_rejection_m_s2", &P::acc_rejection_m_s2},
+                          {"acc_rejection_lowpass_s", &P::acc_rejection_lowpass_s},
+                          {"sustained_acc_tau_s", &P::sustained_acc_tau_s},
+                          {"sustained_acc_sigma", &P::sustained_acc_sigma},
                           {"sigma_m", &P::sigma_m},
                           {"sigma_mag_disturbance", &P::sigma_mag_disturbance},
                           {"tau_mag_disturbance_s", &P::tau_mag_disturbance_s},
@@ -147,6 +150,9 @@ DlkfFilter::DlkfFilter(const Params& params) : OrientationFilter(kName, params),
   require_positive(kName, params.sigma_ext_acc, "sigma_ext_acc");
   require_positive(kName, params.tau_ext_acc_s, "tau_ext_acc_s");
   require_non_negative(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
+  require_non_negative(kName, params.acc_rejection_lowpass_s, "acc_rejection_lowpass_s");
+  require_non_negative(kName, params.sustained_acc_tau_s, "sustained_acc_tau_s");
+  require_positive(kName, params.sustained_acc_sigma, "sustained_acc_sigma");
   require_positive(kName, params.sigma_m, "sigma_m");
   require_positive(kName, params.sigma_mag_disturbance, "sigma_mag_disturbance");
   require_positive(kName, params.tau_mag_disturbance_s, "tau_mag_disturbance_s");
@@ -157,6 +163,7 @@ DlkfFilter::DlkfFilter(const Params& params) : OrientationFilter(kName, params),
   coeff_.var_g = params.sigma_g * params.sigma_g;
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_ext = params.sigma_ext_acc * params.sigma_ext_acc;
+  coeff_.var_sustained = params.sustained_acc_sigma * params.sustained_acc_sigma;
   coeff_.var_m = params.sigma_m * params.sigma_m;
   coeff_.var_dist = params.sigma_mag_disturbance * params.sigma_mag_disturbance;
   coeff_.inv_tau_ext = 1.0 / params.tau_ext_acc_s;
@@ -216,25 +223,47 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
     state_.decay_dt = dt;
     state_.decay_ext = std::exp(-dt * coeff_.inv_tau_ext);
     state_.decay_dist = std::exp(-dt * coeff_.inv_tau_dist);
+    state_.acc_lowpass_k = dt / (params_.acc_rejection_lowpass_s + dt);
+    state_.acc_earth_k = dt / (params_.sustained_acc_tau_s + dt);
   }
 
   // Filter 1: gravity and external acceleration.
   state_.gravity.predict(turn, gyro_var_dt, state_.decay_ext, coeff_.var_ext);
   // | |acc| - g | <= acc_rejection_m_s2, compared squared (no square root).
   const double acc2 = s.acc.squaredNorm();
-  if (s.has_acc &&
-      (params_.acc_rejection_m_s2 == 0.0 || (acc2 >= coeff_.acc_accept_min2 && acc2 <= coeff_.acc_accept_max2))) {
+  bool sustained = false;  // the low-passed deviation beyond the threshold: strong motion going on
+  if (s.has_acc && params_.acc_rejection_m_s2 != 0.0 && params_.acc_rejection_lowpass_s > 0.0) {
+    state_.acc_deviation_lp += state_.acc_lowpass_k * (std::abs(std::sqrt(acc2) - kGravity) - state_.acc_deviation_lp);
+    sustained = state_.acc_deviation_lp > params_.acc_rejection_m_s2;
+  }
+  // A correction turns the estimated gravity, i.e. the estimated orientation, so the field vector turns with it while
+  // no magnetometer steers it. Left alone it would keep the gyro's tilt error that the accelerometer just removed from
+  // gravity, and TRIAD would read that tilt error through the field's dip as heading: started after 1 s of rest with
+  // the magnetometer rejected, under 1 g translations, 26-35 deg of heading error against 10-13 deg of the gyro's own
+  // integral (test_clean_field_motion); with the turn, within it.
+  const auto correct_gravity = [&](const Vec3& measured, double variance) {
     const Vec3 g_before = state_.gravity.vector();
-    state_.gravity.correct(s.acc, coeff_.var_a);
+    state_.gravity.correct(measured, variance);
     if (!state_.have_mag || state_.r_adaption.disturbed()) {  // (never disturbed with mag_rejection 0: never judged)
-      // The correction turns the estimated gravity, i.e. the estimated orientation, so the field vector turns with
-      // it while no magnetometer steers it. Left alone it would keep the gyro's tilt error that the accelerometer
-      // just removed from gravity, and TRIAD would read that tilt error through the field's dip as heading: started
-      // after 1 s of rest with the magnetometer rejected, under 1 g translations, 26-35 deg of heading error
-      // against 10-13 deg of the gyro's own integral (test_clean_field_motion); with the turn, within it.
       state_.magnetic.x.head<3>() =
           Quat::FromTwoVectors(g_before, state_.gravity.vector()) * state_.magnetic.x.head<3>();
     }
+  };
+  if (s.has_acc && params_.sustained_acc_tau_s > 0.0) {
+    // The specific force averaged in the earth frame of the estimate: gravity plus the mean external acceleration of
+    // a body whose velocity stays bounded (zero), seen through the estimate's tilt error. q is the last step's
+    // estimate; `turn` brings a vector from that step's sensor frame to this one's.
+    const Vec3 f_earth = state_.q._transformVector(turn.transpose() * s.acc);
+    state_.acc_earth_lp = state_.acc_earth_started
+                              ? Vec3(state_.acc_earth_lp + state_.acc_earth_k * (f_earth - state_.acc_earth_lp))
+                              : f_earth;
+    state_.acc_earth_started = true;
+    if (sustained)
+      correct_gravity(turn * state_.q.conjugate()._transformVector(state_.acc_earth_lp), coeff_.var_sustained);
+  }
+  if (s.has_acc && !sustained &&
+      (params_.acc_rejection_m_s2 == 0.0 || (acc2 >= coeff_.acc_accept_min2 && acc2 <= coeff_.acc_accept_max2))) {
+    correct_gravity(s.acc, coeff_.var_a);
   }
 
   // Filter 2: geomagnetic field and magnetic disturbance. Before the first magnetometer sample it only carries

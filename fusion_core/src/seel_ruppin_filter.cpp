@@ -16,19 +16,20 @@ constexpr const char* kName = "seel_ruppin";
 constexpr const char* kName6 = "seel_ruppin6";
 
 using P = SeelRuppinFilter::Params;
-constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
-                                               {"tau_acc_s", &P::tau_acc_s},
-                                               {"tau_mag_s", &P::tau_mag_s},
-                                               {"zeta", &P::zeta},
-                                               {"max_acc_error_rad", &P::max_acc_error_rad},
-                                               {"acc_lowpass_tau_s", &P::acc_lowpass_tau_s},
-                                               {"rest_bias_lowpass", &P::rest_bias_lowpass},
-                                               {"max_gyro_bias_rad_s", &P::max_gyro_bias_rad_s},
-                                               {"mag_rejection", &P::mag_rejection},
-                                               {"mag_reference_s", &P::mag_reference_s},
-                                           }),
-                                           bias_param_fields<P>(), mag_disturbance_param_fields<P>(),
-                                           rest_param_fields<P>(), timing_param_fields<P>());
+constexpr auto kParams =
+    join_param_fields(std::to_array<ParamField<P>>({
+                          {"tau_acc_s", &P::tau_acc_s},
+                          {"tau_mag_s", &P::tau_mag_s},
+                          {"zeta", &P::zeta},
+                          {"max_acc_error_rad", &P::max_acc_error_rad},
+                          {"acc_lowpass_tau_s", &P::acc_lowpass_tau_s},
+                          {"rest_bias_lowpass", &P::rest_bias_lowpass},
+                          {"max_gyro_bias_rad_s", &P::max_gyro_bias_rad_s},
+                          {"mag_rejection", &P::mag_rejection},
+                          {"mag_reference_s", &P::mag_reference_s},
+                      }),
+                      bias_param_fields<P>(), mag_disturbance_param_fields<P>(), rest_param_fields<P>(),
+                      sensor_fixed_field_param_fields<P>(), timing_param_fields<P>());
 
 const P& checked(const P& p, const char* name) {
   require_positive(name, p.tau_acc_s, "tau_acc_s");
@@ -93,6 +94,7 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
   state_.rest = RestDetector(params);
   state_.mag_detector = MagDisturbanceDetector(params);
   state_.bias_lowpass = GyroBiasLowPass(params);
+  state_.mag_offset = SensorFixedField(params, use_magnetometer ? kName : kName6);
   coeff_.tau_acc_14 = 1.4 * params.tau_acc_s;
   coeff_.tau_mag_14 = 1.4 * params.tau_mag_s;
   coeff_.tau_start_mag_14 = 1.4 * std::min(params.tau_mag_s, params.tau_acc_s);
@@ -107,6 +109,7 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
   coeff_.acc_lowpass = params.acc_lowpass_tau_s > 0.0;
   coeff_.acc_lowpass_fc_hz =
       coeff_.acc_lowpass ? std::numbers::sqrt2 / (2.0 * std::numbers::pi * params.acc_lowpass_tau_s) : 0.0;
+  coeff_.gyro_integral = coeff_.acc_lowpass || (use_magnetometer && state_.mag_offset.enabled());
   initial_ = state_;
 }
 
@@ -160,7 +163,11 @@ void SeelRuppinFilter::clear() { state_ = initial_; }
 
 UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
   if (!physically_possible(s)) return UpdateResult::kRejected;
-  const std::optional<StartOrientation> initial = start_orientation(s);
+  // A restart after a gap keeps the sensor-fixed field (it belongs to the sensor) and starts its fit afresh.
+  ImuSample corrected = s;
+  if (use_magnetometer_) corrected.mag -= state_.mag_offset.offset();
+  state_.mag_offset.restart_block();
+  const std::optional<StartOrientation> initial = start_orientation(corrected);
   if (!initial) return UpdateResult::kRejected;
   const bool mag_usable = initial->with_mag;
   state_.q = initial->q;
@@ -282,7 +289,7 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
   if (s.has_gyr) {
     const Quat dq = exp_rotation_vector((s.gyr - state_.gyro_bias) * dt);
     state_.q = state_.q * dq;
-    if (coeff_.acc_lowpass) state_.q_gyr = renormalised(state_.q_gyr * dq);
+    if (coeff_.gyro_integral) state_.q_gyr = renormalised(state_.q_gyr * dq);
   }
   // Both corrections are computed from the predicted orientation and applied as one rotation: each turns the
   // estimate by at most a few milliradians, so taking one after the other would change the other's axis only at
@@ -296,7 +303,18 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
     // The magnetometer's own delay; only the horizontal part of the rate turns the field's dip (a turn about the
     // vertical keeps it).
     const Vec3 rate = s.has_gyr ? Vec3(s.gyr - state_.gyro_bias) : Vec3::Zero();
-    const Vec3 mag = params_.mag_latency_s > 0.0 ? lag_compensated(s.mag, rate, params_.mag_latency_s) : s.mag;
+    Vec3 mag = params_.mag_latency_s > 0.0 ? lag_compensated(s.mag, rate, params_.mag_latency_s) : s.mag;
+    if (state_.mag_offset.enabled()) {
+      if (state_.mag_offset.update(s.timestamp_ns, state_.q_gyr, mag) && !state_.mag_learning) {
+        // The fit's earth field is the detector's reference from now on: with the offset removed the readings show
+        // it, whether the offset was there from the start (the reference held it) or came later (a magnet attached).
+        const Vec3& h = state_.mag_offset.field_inertial();
+        const Vec3 up_inertial = state_.q_gyr._transformVector(r_acc);
+        state_.mag_detector.set_reference(h.norm(), MagDisturbanceDetector::dip_angle(h, up_inertial),
+                                          params_.mag_reference_s);
+      }
+      mag -= state_.mag_offset.offset();
+    }
     correction += mag_correction(s, mag, r_acc, rate.cross(r_acc).norm());
   }
   state_.q = state_.q * exp_rotation_vector(correction);  // eqs. 10 and 12

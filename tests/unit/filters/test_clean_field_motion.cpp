@@ -286,14 +286,10 @@ INSTANTIATE_TEST_SUITE_P(NineDFilters, CleanFieldMotion, ::testing::ValuesIn(nin
 // worse than the gyro's own integral from the true start (no collapse, at worst gyro drift; the integral errs 16.5 /
 // 33.0 / 9.8 deg RMS). A filter that skips the accelerometer beyond a threshold falls below that: complementary
 // did with its former 3 m/s^2 (32.2 / 54.8 / 21.3 deg), because the few readings near g in such motion are not
-// gravity either and nothing else corrects them. Every filter runs it, the 6D ones too.
+// gravity either and nothing else corrects them. So did dlkf, which skips its accelerometer beyond 2 m/s^2 (24 / 52 /
+// 14 deg), until it took the specific force low-passed in its earth frame while the motion stays strong (6.7 / 9.0 /
+// 4.6 deg). Every filter runs it, the 6D ones too.
 class SustainedMotion : public ::testing::TestWithParam<FilterInfo> {};
-
-// dlkf skips its accelerometer beyond 2 m/s^2 and models external acceleration as 3 m/s^2 of Gauss-Markov noise:
-// 24.2 / 52.3 / 14.4 deg here. Correcting with a variance raised by the excess instead of skipping gave 20 deg at best
-// and cost BROAD (5.15 -> 5.78 deg); never skipping costs BROAD 5.15 -> 11.6 deg. Reported as skipped with its
-// figure until its model of external acceleration is mended.
-bool tilts_worse_than_the_gyro_in_sustained_motion(const FilterInfo& info) { return is_one_of(info, {"dlkf"}); }
 
 TEST_P(SustainedMotion, StrongAccelerationNeverTiltsWorseThanTheGyroIntegral) {
   for (const std::uint64_t seed : {9, 10, 12}) {
@@ -321,10 +317,6 @@ TEST_P(SustainedMotion, StrongAccelerationNeverTiltsWorseThanTheGyroIntegral) {
       scored += 1.0;
     }
     const double filter_rms = std::sqrt(filter_sq / scored), integral_rms = std::sqrt(integral_sq / scored);
-    if (tilts_worse_than_the_gyro_in_sustained_motion(GetParam()) && !(filter_rms < integral_rms)) {
-      GTEST_SKIP() << "known to miss: inclination RMS " << filter_rms / kDeg << " deg, the gyro integral "
-                   << integral_rms / kDeg << " deg (seed " << seed << ")";
-    }
     EXPECT_LT(filter_rms, integral_rms) << "seed " << seed << ": inclination RMS " << filter_rms / kDeg
                                         << " deg, the gyro integral " << integral_rms / kDeg << " deg";
   }

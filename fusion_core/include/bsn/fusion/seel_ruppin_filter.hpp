@@ -15,6 +15,7 @@
 #include "bsn/fusion/mag_disturbance_detector.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
 #include "bsn/fusion/rest_detector.hpp"
+#include "bsn/fusion/sensor_fixed_field.hpp"
 
 namespace bsn::fusion {
 
@@ -23,7 +24,11 @@ class SeelRuppinFilter final : public OrientationFilter {
   /// Own fields below; the shared groups come from the base structs (documented there). The bias low-pass acts
   /// only with rest_bias_lowpass = 1. During the start-up period (init_period_s) the filter corrects the tilt without
   /// the clip and the heading with tau_acc if that is shorter than tau_mag, and learns no bias.
-  struct Params : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
+  struct Params : GyroBiasLowPass::Params,
+                  MagDisturbanceDetector::Params,
+                  RestDetector::Params,
+                  SensorFixedField::Params,
+                  FilterTimingParams {
     /// tau_acc: half-value time of the convergence towards the accelerometer's inclination, s. Larger trusts
     /// the gyro longer, smaller removes tilt drift faster. With the acceleration low-pass on (the default) the
     /// low-pass already removes the accelerations of human motion, so this correction can be fast. Default
@@ -71,7 +76,9 @@ class SeelRuppinFilter final : public OrientationFilter {
     // The detector (MagDisturbanceDetector::Params) tolerates the magnetometer's lag while the sensor turns
     // (mag_latency_s, fed with the bias-corrected rate; each reading is also brought forward by it before use), and
     // after mag_accept_after_s of rejection uses the magnetometer again with tau_mag lengthened by
-    // 1 / mag_reduced_gain, so the heading never drifts without bound.
+    // 1 / mag_reduced_gain, so the heading never drifts without bound. A field fixed to the sensor that the gyro
+    // confirms (SensorFixedField::Params) is subtracted from each reading before the detector and the correction see
+    // it; when it changes, the detector learns its reference afresh.
   };
 
   /// Quantities derived once from Params.
@@ -88,13 +95,14 @@ class SeelRuppinFilter final : public OrientationFilter {
     /// tan^2 of the largest error the series path of correct_acc takes: min(0.1, tan(max_acc_error_rad))^2
     double small_acc_error_tan2 = 0.0;
     bool acc_lowpass = false;        ///< acc_lowpass_tau_s > 0
+    bool gyro_integral = false;      ///< q_gyr is kept: for the acc low-pass or the sensor-fixed field
     double acc_lowpass_fc_hz = 0.0;  ///< sqrt(2) / (2 pi tau): the Butterworth corner frequency
   };
 
   struct State {
     Quat q = Quat::Identity();        ///< sensor-to-earth
     Vec3 gyro_bias = Vec3::Zero();    ///< sensor frame, rad/s; the paper's b is -gyro_bias (eq. 14 adds b)
-    Quat q_gyr = Quat::Identity();    ///< sensor-to-inertial: strapdown integration only (acc low-pass frame)
+    Quat q_gyr = Quat::Identity();    ///< sensor-to-inertial: strapdown integration only (acc low-pass, mag offset)
     Vec3 acc_lp_y = Vec3::Zero();     ///< acc low-pass output, inertial frame, m/s^2
     Vec3 acc_lp_rate = Vec3::Zero();  ///< its time derivative, m/s^3 (the second state of the low-pass)
     double acc_lp_warmup_s = 0.0;     ///< time the low-pass has run; below tau it outputs the running mean
@@ -110,6 +118,7 @@ class SeelRuppinFilter final : public OrientationFilter {
     RestDetector rest;                    ///< still-sensor detection (flags().resting, the bias updates' gate)
     GyroBiasLowPass bias_lowpass;         ///< the rest bias low-pass (rest_bias_lowpass), seeded from gyro_bias
     MagDisturbanceDetector mag_detector;  ///< magnetometer rejection
+    SensorFixedField mag_offset;          ///< the field fixed to the sensor, learned against q_gyr
     FilterFlags flags;
   };
 
