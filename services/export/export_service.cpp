@@ -576,6 +576,9 @@ int run_export(const ExportOptions& opt) {
     }
     std::fprintf(stderr, "bsn export: %d files in %s\n", files, opt.out_dir.c_str());
     return 0;
+  } catch (const io::FormatError& e) {  // missing, empty, truncated or not a session: the input is wrong
+    std::fprintf(stderr, "bsn export: error: %s\n", e.what());
+    return 2;
   } catch (const io::IoError& e) {
     std::fprintf(stderr, "bsn export: error: %s\n", e.what());
     return 1;

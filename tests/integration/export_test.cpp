@@ -8,6 +8,7 @@
 #include <fstream>
 #include <numbers>
 #include <sstream>
+#include <tuple>
 
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/io/recording.hpp"
@@ -103,7 +104,7 @@ TEST_F(Export, StoHasOpenSenseLayoutAndReadsBackAsTheTruth) {
   }
 }
 
-TEST_F(Export, CsvAndBroadFromOneSession) {
+TEST_F(Export, CsvAndBroadFromOneSessionAndExit2OnBadInput) {
   const std::string session = record_session(29);
   const std::string csv = (dir() / "csv").string(), broad = (dir() / "broad").string();
   spawn("csv", {"export", session, "--format", "csv", "--out", csv});
@@ -130,6 +131,20 @@ TEST_F(Export, CsvAndBroadFromOneSession) {
   spawn("eval", {"eval", broad, "--filter", "seel_ruppin", "--json"});
   ASSERT_EQ(exit_code(child("eval").wait_for(60s)), 0) << read_file(log_path("eval"));
   EXPECT_NE(read_file(log_path("eval")).find("\"trial\": \"imu\""), std::string::npos) << read_file(log_path("eval"));
+
+  // Bad input is a usage error (exit 2) naming the file: missing, empty, cut short.
+  const auto cut = dir() / "cut.h5";
+  std::filesystem::copy_file(session, cut);
+  std::filesystem::resize_file(cut, std::filesystem::file_size(cut) / 2);
+  write_file(dir() / "empty.h5", "");
+  for (const auto& [name, file, says] : std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"missing", (dir() / "nope.h5").string(), "nope.h5: no such file"},
+           {"empty", (dir() / "empty.h5").string(), "empty.h5: not an HDF5 file"},
+           {"cut", cut.string(), "cut.h5: "}}) {
+    spawn(name, {"export", file, "--format", "csv", "--out", (dir() / ("out-" + name)).string()});
+    EXPECT_EQ(exit_code(child(name).wait_for(30s)), 2) << read_file(log_path(name));
+    EXPECT_NE(read_file(log_path(name)).find(says), std::string::npos) << read_file(log_path(name));
+  }
 }
 
 TEST_F(Export, EchoPrintsCsvAndJson) {

@@ -380,18 +380,18 @@ herr_t collect_attribute(hid_t object, const char* name, const H5A_info_t*, void
 
 SessionReader::SessionReader(const std::string& path) : path_(path) {
   hdf5::quiet_errors();
-  if (!std::filesystem::exists(path)) throw IoError(path + ": no such file");
-  if (H5Fis_hdf5(path.c_str()) <= 0) throw IoError(path + ": not an HDF5 file (or truncated)");
+  if (!std::filesystem::exists(path)) throw FormatError(path + ": no such file");
+  if (H5Fis_hdf5(path.c_str()) <= 0) throw FormatError(path + ": not an HDF5 file (or truncated)");
   file_id_ = H5Fopen(path.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
-  if (file_id_ < 0) throw IoError(path + ": cannot open as HDF5 (truncated or damaged?)");
+  if (file_id_ < 0) throw FormatError(path + ": cannot open as HDF5 (truncated or damaged?)");
   hsize_t index = 0;
   H5Aiterate2(file_id_, H5_INDEX_NAME, H5_ITER_INC, &index, collect_attribute, &attributes_);
   if (attributes_.count("format") == 0 || attributes_.at("format") != kSessionFormat) {
-    throw IoError(path + ": not a bsn session file (root attribute 'format' is not '" + kSessionFormat + "')");
+    throw FormatError(path + ": not a bsn session file (root attribute 'format' is not '" + kSessionFormat + "')");
   }
   VisitState state{file_id_, &streams_};
   if (H5Lvisit(file_id_, H5_INDEX_NAME, H5_ITER_INC, visit_link, &state) < 0) {
-    throw IoError(path + ": cannot list the groups (truncated or damaged?)");
+    throw FormatError(path + ": cannot list the groups (truncated or damaged?)");
   }
   std::sort(streams_.begin(), streams_.end(),
             [](const SessionStream& a, const SessionStream& b) { return a.group < b.group; });
@@ -416,10 +416,10 @@ bool SessionReader::has(const SessionStream& s, const std::string& dataset) cons
 std::size_t SessionReader::rows(const SessionStream& s, const std::string& dataset) const {
   const std::string p = s.group + "/" + dataset;
   Handle ds(H5Dopen2(file_id_, p.c_str(), H5P_DEFAULT), H5Dclose);
-  if (!ds.ok()) throw IoError(path_ + ": missing dataset '" + p + "'");
+  if (!ds.ok()) throw FormatError(path_ + ": missing dataset '" + p + "'");
   Handle space(H5Dget_space(ds.get()), H5Sclose);
   hsize_t dims[2] = {0, 0};
-  if (H5Sget_simple_extent_dims(space.get(), dims, nullptr) < 1) throw IoError(path_ + ": bad dataset '" + p + "'");
+  if (H5Sget_simple_extent_dims(space.get(), dims, nullptr) < 1) throw FormatError(path_ + ": bad dataset '" + p + "'");
   return static_cast<std::size_t>(dims[0]);
 }
 
@@ -427,23 +427,23 @@ template <class T>
 std::vector<T> SessionReader::read(const SessionStream& s, const std::string& dataset, long long mem_type,
                                    int width) const {
   const std::string p = s.group + "/" + dataset;
-  if (H5Lexists(file_id_, p.c_str(), H5P_DEFAULT) <= 0) throw IoError(path_ + ": missing dataset '" + p + "'");
+  if (H5Lexists(file_id_, p.c_str(), H5P_DEFAULT) <= 0) throw FormatError(path_ + ": missing dataset '" + p + "'");
   Handle ds(H5Dopen2(file_id_, p.c_str(), H5P_DEFAULT), H5Dclose);
-  if (!ds.ok()) throw IoError(path_ + ": cannot open dataset '" + p + "'");
+  if (!ds.ok()) throw FormatError(path_ + ": cannot open dataset '" + p + "'");
   Handle space(H5Dget_space(ds.get()), H5Sclose);
   hsize_t dims[2] = {0, 1};
   const int rank = H5Sget_simple_extent_ndims(space.get());
   if (rank < 1 || rank > 2 || H5Sget_simple_extent_dims(space.get(), dims, nullptr) < 0) {
-    throw IoError(path_ + ": dataset '" + p + "' is not a column");
+    throw FormatError(path_ + ": dataset '" + p + "' is not a column");
   }
   const hsize_t cols = rank == 2 ? dims[1] : 1;
   if (cols != static_cast<hsize_t>(width)) {
-    throw IoError(path_ + ": dataset '" + p + "' has " + std::to_string(cols) + " columns, expected " +
-                  std::to_string(width));
+    throw FormatError(path_ + ": dataset '" + p + "' has " + std::to_string(cols) + " columns, expected " +
+                      std::to_string(width));
   }
   std::vector<T> out(static_cast<std::size_t>(dims[0] * cols));
   if (!out.empty() && H5Dread(ds.get(), mem_type, H5S_ALL, H5S_ALL, H5P_DEFAULT, out.data()) < 0) {
-    throw IoError(path_ + ": cannot read dataset '" + p + "' (truncated file?)");
+    throw FormatError(path_ + ": cannot read dataset '" + p + "' (truncated file?)");
   }
   return out;
 }
