@@ -720,7 +720,14 @@ struct RunResult {
   bool pass = false;
   std::string notes;  ///< anomalies that do not decide the verdict
   bool bench_limited() const { return publisher_limited || bench_receive_limited; }
+  double service_idle_cpu_s_per_s = NAN;  ///< the service's CPU when idle after the window, s per s
+  double service_window_s = NAN;
   double us_per_sample() const { return sent > 0 ? 1e6 * service_cpu_s / static_cast<double>(sent) : NAN; }
+  /// CPU per sample above the service's idle cost.
+  double marginal_us_per_sample() const {
+    return sent > 0 ? 1e6 * (service_cpu_s - service_idle_cpu_s_per_s * service_window_s) / static_cast<double>(sent)
+                    : NAN;
+  }
 };
 
 class Bench {
@@ -982,6 +989,18 @@ class Bench {
             r.status_delta = b - a;
           }
         }
+        // The service idle (publishers stopped): its fixed cost (DDS's own threads and timers, status), to tell the
+        // cost of a sample from the cost of running at all.
+        if (r.error.empty()) {
+          const auto idle0 = cpu_times(child->pid());
+          const auto i0 = dds::monotonic_ns();
+          dds::sleep_unless_shutdown(std::chrono::seconds(2));
+          const auto idle1 = cpu_times(child->pid());
+          if (idle0 && idle1)
+            r.service_idle_cpu_s_per_s =
+                (idle1->first - idle0->first) / (static_cast<double>(dds::monotonic_ns() - i0) / 1e9);
+          r.service_window_s = wall_s;
+        }
         if (r.error.empty()) r.completed = true;
       }
       control->stop.store(1);
@@ -1119,9 +1138,11 @@ void print_run_details(const RunResult& r, const Options& opt) {
       static_cast<unsigned long long>(r.overrun_ticks), r.late_into_window ? ", warm-up ran into the window" : "",
       r.publisher_limited ? "  => the bench could not keep the schedule" : "");
   std::printf(
-      "    CPU: %s %s %% (%s us per sample, of which system %s), bench %s %% (all its processes; 100 %% = one core), "
+      "    CPU: %s %s %% (%s us per sample, %s above its idle %s %%; system %s), bench %s %% (all its processes; 100 "
+      "%% = one core), "
       "steal %s %%; %s RSS %s MB; UDP receive-buffer drops: %s %s, bench %s\n",
       service_name(r.service), fmt("%.1f", r.service_cpu_pct).c_str(), fmt("%.2f", r.us_per_sample()).c_str(),
+      fmt("%.2f", r.marginal_us_per_sample()).c_str(), fmt("%.1f", 100.0 * r.service_idle_cpu_s_per_s).c_str(),
       fmt("%.2f", r.sent > 0 ? 1e6 * r.service_sys_s / static_cast<double>(r.sent) : NAN).c_str(),
       fmt("%.1f", r.bench_cpu_pct).c_str(), fmt("%.1f", r.steal_pct).c_str(), service_name(r.service),
       fmt("%.1f", r.service_rss ? static_cast<double>(*r.service_rss) / 1e6 : NAN).c_str(), service_name(r.service),
@@ -1408,28 +1429,31 @@ int main(int argc, char** argv) {
     if (latency) {
       auto line = [&](const RunResult& r) {
         std::printf(
-            "  %-6s median %s us, p90 %s us, p99 %s us, max %s us; %s us CPU per sample (%llu sent, %llu received)%s\n",
+            "  %-6s median %s us, p90 %s us, p99 %s us, max %s us; %s us CPU per sample, %s above idle (%llu "
+            "sent, %llu received)%s\n",
             service_name(r.service), fmt("%.0f", r.latency.p50_us).c_str(), fmt("%.0f", r.latency.p90_us).c_str(),
             fmt("%.0f", r.latency.p99_us).c_str(), fmt("%.0f", r.latency.max_us).c_str(),
-            fmt("%.2f", r.us_per_sample()).c_str(), static_cast<unsigned long long>(r.sent),
-            static_cast<unsigned long long>(r.received), r.pass ? "" : ("  FAILED: " + r.error).c_str());
+            fmt("%.2f", r.us_per_sample()).c_str(), fmt("%.2f", r.marginal_us_per_sample()).c_str(),
+            static_cast<unsigned long long>(r.sent), static_cast<unsigned long long>(r.received),
+            r.pass ? "" : ("  FAILED: " + r.error).c_str());
       };
       std::printf("latency, raw sample written -> orientation received, %d segments x %.0f Hz, %.0f s, %s pacing:\n",
                   latency->n, opt.rate_hz, opt.latency_seconds, opt.pacing.c_str());
       if (latency_relay) line(*latency_relay);
       line(*latency);
       if (latency_relay) {
-        std::printf("  fusion / relay: median %s x, p99 %s x, CPU per sample %s x\n",
+        std::printf("  fusion / relay: median %s x, p99 %s x, CPU per sample %s x (above idle %s x)\n",
                     ratio(latency->latency.p50_us, latency_relay->latency.p50_us).c_str(),
                     ratio(latency->latency.p99_us, latency_relay->latency.p99_us).c_str(),
-                    ratio(latency->us_per_sample(), latency_relay->us_per_sample()).c_str());
+                    ratio(latency->us_per_sample(), latency_relay->us_per_sample()).c_str(),
+                    ratio(latency->marginal_us_per_sample(), latency_relay->marginal_us_per_sample()).c_str());
       }
     }
     if (!steps.empty()) {
       std::printf("capacity at %.0f Hz per segment, %.0f s per step, no loss allowed (fusion, relay, fusion/relay):\n",
                   opt.rate_hz, opt.step_seconds);
-      std::printf("  %6s %4s %9s %7s %16s %16s %16s %9s %8s %8s  %s\n", "N", "pubs", "sent", "lost", "p50 us", "p99 us",
-                  "us/sample", "fusion %", "RSS MB", "pub Hz", "result");
+      std::printf("  %6s %4s %9s %7s %18s %18s %16s %16s %9s %8s %8s  %s\n", "N", "pubs", "sent", "lost", "p50 us",
+                  "p99 us", "us/sample", "above idle", "fusion %", "RSS MB", "pub Hz", "result");
       std::vector<const RunResult*> sorted;
       for (const auto& r : steps) sorted.push_back(&r);
       std::stable_sort(sorted.begin(), sorted.end(), [](auto* a, auto* b) { return a->n < b->n; });
@@ -1439,12 +1463,13 @@ int main(int argc, char** argv) {
         auto triple = [&](double f, double rel, const char* format) {
           return fmt(format, f) + " " + (b ? fmt(format, rel) : "-") + " " + (b ? ratio(f, rel) : "-");
         };
-        std::printf("  %6d %4d %9llu %7lld %16s %16s %16s %9s %8s %8.1f  %s%s\n", r->n, r->publishers,
+        std::printf("  %6d %4d %9llu %7lld %18s %18s %16s %16s %9s %8s %8.1f  %s%s\n", r->n, r->publishers,
                     static_cast<unsigned long long>(r->sent),
                     static_cast<long long>(r->sent) - static_cast<long long>(r->received),
                     triple(r->latency.p50_us, b ? b->latency.p50_us : NAN, "%.0f").c_str(),
                     triple(r->latency.p99_us, b ? b->latency.p99_us : NAN, "%.0f").c_str(),
                     triple(r->us_per_sample(), b ? b->us_per_sample() : NAN, "%.2f").c_str(),
+                    triple(r->marginal_us_per_sample(), b ? b->marginal_us_per_sample() : NAN, "%.2f").c_str(),
                     fmt("%.1f", r->service_cpu_pct).c_str(),
                     fmt("%.1f", r->service_rss ? static_cast<double>(*r->service_rss) / 1e6 : NAN).c_str(),
                     r->achieved_rate_hz, verdict(*r),
