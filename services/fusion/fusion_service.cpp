@@ -165,8 +165,10 @@ void FusionService::on_raw(const bsn::RawSample& raw, const fusion::SourceId& wr
     joint = r.joint.has_value();
   }
   // publish_mutex_ keeps the pipeline's messages whole until written (the next raw sample waits for it).
-  if (!orientation_writer_->write(pipeline_.orientation())) ++write_failures_;
-  if (joint && !joint_writer_->write(pipeline_.joint())) ++write_failures_;
+  // A sample no reader could ever receive is not written: a write costs about as much as the rest of the sample's
+  // path (serialisation, history, acknowledgement bookkeeping) even with no one to send it to.
+  if (!orientation_writer_->unheard() && !orientation_writer_->write(pipeline_.orientation())) ++write_failures_;
+  if (joint && !joint_writer_->unheard() && !joint_writer_->write(pipeline_.joint())) ++write_failures_;
 }
 
 void FusionService::log_source_events(const fusion::SampleResult& r, std::uint64_t now) {

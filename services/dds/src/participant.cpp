@@ -298,15 +298,21 @@ void count_undecodable(EndpointEvents& events) {
 
 void count_lost(EndpointEvents& events, const SampleInfo& info) {
   const std::int64_t seq = info.sample_identity.sequence_number().to64long();
-  auto [it, first] = events.last_sequence.try_emplace(info.sample_identity.writer_guid(), seq);
-  if (first) return;  // samples before a reader matches are not its losses
-  if (seq > it->second + 1) {
-    const auto lost = static_cast<std::uint64_t>(seq - it->second - 1);
+  const auto& writer = info.sample_identity.writer_guid();
+  if (events.last_writer_sequence == nullptr || events.last_writer != writer) {
+    auto [it, first] = events.last_sequence.try_emplace(writer, seq);
+    events.last_writer = writer;
+    events.last_writer_sequence = &it->second;  // std::map entries stay where they are
+    if (first) return;                          // samples before a reader matches are not its losses
+  }
+  std::int64_t& last = *events.last_writer_sequence;
+  if (seq > last + 1) {
+    const auto lost = static_cast<std::uint64_t>(seq - last - 1);
     if (events.lost_counter && (*events.lost_counter += lost) == lost)
       logging::log_warn("topic ", events.topic, ": ", lost, " sample(s) of a writer never arrived (a DDS resource ",
                         "limit, a full history or the network); counted on bsn/status as dds_lost_samples");
   }
-  it->second = std::max(it->second, seq);
+  last = std::max(last, seq);
 }
 
 int default_domain() {

@@ -45,6 +45,44 @@ TEST(GuardedTypeSupport, AKeyLongerThanTheGeneratedBufferGetsTheSpecificationsHa
   EXPECT_NE(h256, generated);
 }
 
+// The handles come from a per-thread cache after a key's first sample: each must still be the generated code's own
+// (which other Fast DDS participants compute), whether the key is new, seen before or seen before the cache was
+// emptied at its bound.
+template <class PubSub, class SetKey>
+void expect_cached_handles_are_the_generated_ones(SetKey set_key) {
+  Guarded<PubSub> type;
+  typename PubSub::type sample;
+  const std::size_t keys = detail::KeyHandleCache::kMaxKeys + 100;
+  std::vector<InstanceHandle_t> first(keys);
+  for (int pass = 0; pass < 2; ++pass) {
+    for (std::size_t i = 0; i < keys; ++i) {
+      set_key(sample, "k" + std::to_string(i) + std::string(i % 40, 'x'));
+      InstanceHandle_t generated, cached;
+      ASSERT_TRUE(type.PubSub::getKey(&sample, &generated));
+      ASSERT_TRUE(type.getKey(&sample, &cached));
+      ASSERT_EQ(cached, generated) << "key " << i << ", pass " << pass;
+      if (pass == 0) first[i] = cached;
+      ASSERT_EQ(cached, first[i]);
+    }
+  }
+  // Distinct keys, distinct handles.
+  EXPECT_NE(first[0], first[1]);
+}
+
+TEST(GuardedTypeSupport, CachedInstanceHandlesAreTheGeneratedCodesForEveryKeyedTopic) {
+  expect_cached_handles_are_the_generated_ones<bsn::RawSamplePubSubType>(
+      [](bsn::RawSample& s, const std::string& k) { s.node_id(k); });
+  expect_cached_handles_are_the_generated_ones<bsn::OrientationPubSubType>(
+      [](bsn::Orientation& s, const std::string& k) {
+        s.segment(k);
+        s.node_id("not part of the key");
+      });
+  expect_cached_handles_are_the_generated_ones<bsn::JointAnglesPubSubType>(
+      [](bsn::JointAngles& s, const std::string& k) { s.joint(k); });
+  expect_cached_handles_are_the_generated_ones<bsn::StatusPubSubType>(
+      [](bsn::Status& s, const std::string& k) { s.process_id(k); });
+}
+
 TEST(GuardedTypeSupport, ABoolThatIsNeitherZeroNorOneIsRefusedNotThrown) {
   Guarded<bsn::CalibrationResultPubSubType> type;
   bsn::CalibrationResult result;

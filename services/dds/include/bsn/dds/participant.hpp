@@ -42,6 +42,10 @@ struct EndpointEvents {
   /// limit (max_instances) without a SAMPLE_REJECTED or SAMPLE_LOST status; a writer numbers its samples 1, 2, 3,
   /// ..., so a gap is a loss, whatever caused it (that limit, a full history, the network). Callback thread only.
   std::map<eprosima::fastrtps::rtps::GUID_t, std::int64_t> last_sequence;
+  /// The writer of the last sample taken and its entry in last_sequence: a node's samples come in runs from one
+  /// writer, so most samples need no look-up.
+  eprosima::fastrtps::rtps::GUID_t last_writer;
+  std::int64_t* last_writer_sequence = nullptr;
   std::mutex callback_mutex;
   std::function<void(eprosima::fastdds::dds::DataReader*)> on_data;
 };
@@ -56,17 +60,23 @@ template <class T>
 class Writer {
  public:
   Writer(eprosima::fastdds::dds::DataWriter* w, std::shared_ptr<EndpointEvents> ev)
-      : writer_(w), events_(std::move(ev)) {}
+      : writer_(w),
+        events_(std::move(ev)),
+        volatile_(w->get_qos().durability().kind == eprosima::fastdds::dds::VOLATILE_DURABILITY_QOS) {}
   /// Returns false if DDS refused the sample (it is then lost and the caller should count it).
   bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
   /// Readers currently matched.
   int matched() const { return events_->matched.load(); }
+  /// True if a sample written now could reach no reader, ever: no reader is matched and the writer keeps nothing
+  /// for later ones (VOLATILE; an XML profile may make it otherwise). Such a write may be skipped.
+  bool unheard() const { return volatile_ && matched() == 0; }
   /// The writer's GUID: what readers see as the sample's writer (SampleInfo::sample_identity.writer_guid()).
   eprosima::fastrtps::rtps::GUID_t guid() const { return writer_->guid(); }
 
  private:
   eprosima::fastdds::dds::DataWriter* writer_;
   std::shared_ptr<EndpointEvents> events_;
+  bool volatile_;
 };
 
 /// A typed reader whose callback runs on a DDS thread for every valid sample. Once the Reader is destroyed
@@ -133,9 +143,10 @@ class Participant {
       std::function<void(const typename PubSub::type&, const eprosima::fastdds::dds::SampleInfo&)> on_sample,
       std::optional<TopicQos> delivery = {}, Admission<typename PubSub::type> admit = {}) {
     auto events = std::make_shared<EndpointEvents>();
-    events->on_data = [cb = std::move(on_sample),
-                       events_ptr = events.get()](eprosima::fastdds::dds::DataReader* reader) {
-      typename PubSub::type sample;
+    // One sample object for the reader's life (on_data runs under the callback mutex): its strings and sequences
+    // keep their storage from one sample to the next.
+    events->on_data = [cb = std::move(on_sample), events_ptr = events.get(),
+                       sample = typename PubSub::type()](eprosima::fastdds::dds::DataReader* reader) mutable {
       eprosima::fastdds::dds::SampleInfo info;
       while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
         count_lost(*events_ptr, info);
