@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <stdexcept>
 
+#include "bsn/config/subjects.hpp"
 #include "bsn/dds/shutdown.hpp"
 #include "bsn/logging/log.hpp"
 
@@ -144,8 +145,21 @@ void add_domain_option(CLI::App* command, int& domain) {
 
 DdsCommandFrame::Handlers::Handlers() { dds::install_shutdown_handlers(); }
 
-DdsCommandFrame::DdsCommandFrame(int domain, const std::string& participant_name)
-    : participant_({domain, participant_name}) {}
+DdsCommandFrame::DdsCommandFrame(int domain, const std::string& participant_name, const std::string& subject)
+    : participant_({domain, participant_name, subject}) {}
+
+void add_subject_option(CLI::App* command, std::string& subject) {
+  command
+      ->add_option("--subject", subject,
+                   "the subject (DDS partition) whose estimates and status to read (default: the single-body "
+                   "fusion's, in the default partition)")
+      ->check(CLI::Validator(
+          [](std::string& value) {
+            const std::string problem = config::subject_name_problem(value);
+            return problem.empty() ? std::string() : "subject '" + value + "' " + problem;
+          },
+          "NAME"));
+}
 
 int DdsCommandFrame::run_ticks(std::chrono::milliseconds period, const std::function<std::optional<int>()>& tick) {
   while (dds::sleep_unless_shutdown(period)) {

@@ -46,12 +46,16 @@ CLI::Validator non_negative_number(double max = std::numeric_limits<double>::inf
 /// Adds --domain (default: $BSN_DOMAIN or 0) to a DDS command.
 void add_domain_option(CLI::App* command, int& domain);
 
+/// Adds --subject NAME to a command that reads estimates: the subject (DDS partition) it reads.
+void add_subject_option(CLI::App* command, std::string& subject);
+
 /// What every long-running DDS command (fusion, echo, sim) runs in: SIGINT/SIGTERM handlers and the process's
 /// one participant from construction, the periodic tick loop in run_ticks(). Endpoints made from participant()
 /// are declared after the frame, so they close before the participant does.
 class DdsCommandFrame {
  public:
-  DdsCommandFrame(int domain, const std::string& participant_name);
+  /// `subject`: the subject whose estimates and status the participant reads and writes (Participant::Options).
+  DdsCommandFrame(int domain, const std::string& participant_name, const std::string& subject = "");
   dds::Participant& participant() { return participant_; }
 
   /// Calls `tick` every `period` until SIGINT, SIGTERM or dds::request_shutdown (-> 0) or until `tick` returns

@@ -25,6 +25,7 @@ struct EchoOptions {
   double rate_hz = 0.0;    ///< print at most this many samples per second (0 = all)
   double timeout_s = 0.0;  ///< exit 1 if not `count` samples within this time (0 = wait forever)
   int domain = 0;
+  std::string subject;          ///< the subject (DDS partition) of estimates and status
   std::string format = "text";  ///< text (human units), csv (header line, then SI values) or json (one per line)
 };
 
@@ -154,7 +155,7 @@ int run_echo(const EchoOptions& opt) {
   }
   Printer printer(opt);
   EstimateWatch watch;
-  DdsCommandFrame frame(opt.domain, "bsn echo");
+  DdsCommandFrame frame(opt.domain, "bsn echo", opt.subject);
   std::shared_ptr<void> reader;  // of the one topic named, whatever its type
   dds::for_each_topic([&](const auto& topic) {
     if (opt.topic != topic.name) return;
@@ -220,6 +221,7 @@ Command echo_command() {
                 ->check(CLI::IsMember({"text", "csv", "json"}))
                 ->capture_default_str();
             add_domain_option(cmd, opt->domain);
+            add_subject_option(cmd, opt->subject);
             return [opt] { return run_echo(*opt); };
           }};
 }

@@ -6,11 +6,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <optional>
+#include <set>
 #include <string>
 
 #include "bsn/config/body_config.hpp"
 #include "bsn/config/calibration_file.hpp"
+#include "bsn/config/subjects.hpp"
 #include "bsn/dds/conversions.hpp"
 #include "bsn/dds/sample_source.hpp"
 #include "bsn/logging/log.hpp"
@@ -39,19 +42,24 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
       conflict_logged_ns_(fusion_.body().segments.size(), 0),
       not_permitted_(fusion_.body().segments.size(), 0),
       not_permitted_logged_ns_(fusion_.body().segments.size(), 0) {
-  if (options_.process_id.empty()) options_.process_id = default_process_id();
+  if (options_.process_id.empty())
+    options_.process_id = default_process_id() + (options_.subject.empty() ? "" : "/" + options_.subject);
   // --best-effort switches both estimate topics from their own delivery to BEST_EFFORT.
   const auto estimate = [this](const auto& topic) {
     return options_.best_effort ? dds::TopicQos::kEstimateBestEffort : topic.qos;
   };
-  orientation_writer_ = participant_.make_writer(dds::kOrientationTopic, estimate(dds::kOrientationTopic));
-  joint_writer_ = participant_.make_writer(dds::kJointAnglesTopic, estimate(dds::kJointAnglesTopic));
-  status_writer_ = participant_.make_writer(dds::kStatusTopic);
+  // Each subject's estimates and status go in its partition; of a primary and its standby, DDS delivers the
+  // estimates of the strongest live one.
+  const dds::WriterScope scope{options_.subject, options_.ownership_strength};
+  orientation_writer_ = participant_.make_writer(dds::kOrientationTopic, estimate(dds::kOrientationTopic), "", scope);
+  joint_writer_ = participant_.make_writer(dds::kJointAnglesTopic, estimate(dds::kJointAnglesTopic), "", scope);
+  status_writer_ = participant_.make_writer(dds::kStatusTopic, std::nullopt, "", scope);
   last_status_ns_ = rate_window_start_ns_ = dds::monotonic_ns();
   // Another fusion service publishing any of our segments doubles every orientation and joint angle under the
   // same keys: each notices the other's bsn/status (keyed by process id), warns and lists it in its own status.
   status_reader_ = participant_.make_reader(
-      dds::kStatusTopic, [this](const bsn::Status& st, const eprosima::fastdds::dds::SampleInfo&) { on_status(st); });
+      dds::kStatusTopic, [this](const bsn::Status& st, const eprosima::fastdds::dds::SampleInfo&) { on_status(st); },
+      std::nullopt, {}, options_.subject);
   // The raw reader goes last: its callback may fire as soon as it exists.
   // Each sample's writer goes with it: a node's samples are taken from one writer at a time.
   // Samples of nodes on no segment are counted and dropped before they enter the reader's history, so however many
@@ -114,6 +122,7 @@ void FusionService::on_calibration(const bsn::CalibrationResult& r) {
 
 bool FusionService::admit_raw(const bsn::RawSample& raw) {
   if (fusion_.segment_of(raw.node_id())) return true;  // the body model does not change: no lock needed
+  if (options_.served_elsewhere && options_.served_elsewhere->contains(raw.node_id())) return false;
   std::lock_guard lock(mutex_);
   const fusion::SampleResult& r = fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)},
                                                   dds::monotonic_ns(), fusion::SourceId{});  // counted there
@@ -195,6 +204,9 @@ void FusionService::log_source_events(const fusion::SampleResult& r, std::uint64
 
 void FusionService::on_status(const bsn::Status& other) {
   if (other.process_id() == options_.process_id) return;
+  // With exclusive ownership a second fusion of the same segments is the point (primary and standby): DDS
+  // delivers one of them.
+  if (options_.ownership_strength) return;
   std::string shared;
   for (const bsn::NodeStatus& n : other.nodes()) {
     if (!fusion_.body().find_segment(n.segment())) continue;
@@ -229,6 +241,11 @@ void FusionService::tick() {
     }
   }
   if (status) status_writer_->write(*status);
+  if (options_.ownership_strength) {
+    // Owned estimates stay alive between samples (a body at rest on silent sensors), each tick < the lease.
+    orientation_writer_->assert_liveliness();
+    joint_writer_->assert_liveliness();
+  }
 }
 
 bsn::Status FusionService::make_status(std::uint64_t now) {
@@ -287,33 +304,118 @@ namespace {
 constexpr double kMaxSeconds = 86400.0;
 
 struct FusionCommandOptions {
-  std::string body_path;  ///< "" = the default 7-segment lower body
+  std::vector<std::string> body_paths;  ///< empty = the default 7-segment lower body
+  std::vector<std::string> subjects;    ///< --subject: serve only these (empty: every subject listed)
+  int share = 0;                        ///< --share: serve the subjects of this share (0: every share)
   bool print_body = false;
   int domain = 0;
+  std::optional<std::uint32_t> ownership_strength;
+  bool primary = false;
+  bool standby = false;
   FusionService::Options service;
 };
 
-int run_fusion(const FusionCommandOptions& opt) {
+// The strengths of --primary and --standby: a reader takes each instance from the strongest live writer.
+constexpr std::uint32_t kPrimaryStrength = 100;
+constexpr std::uint32_t kStandbyStrength = 50;
+
+/// One subject this process serves.
+struct ServedSubject {
+  std::string subject;
+  std::string body_path;  ///< "" for the default body
   fusion::BodyModel body;
-  FusionService::Options service_options = opt.service;
+  fusion::BodyFusion::Calibrations calibrations;
+};
+
+/// The subjects of the body files that this process serves (its share), and the nodes of every other subject
+/// listed. Throws config::ConfigError.
+std::vector<ServedSubject> served_subjects(const FusionCommandOptions& opt, std::set<std::string>& other_nodes) {
+  std::vector<config::SubjectEntry> entries;
+  if (opt.body_paths.empty()) entries.push_back({"", "", 0});
+  for (const std::string& path : opt.body_paths)
+    for (config::SubjectEntry& e : config::load_subject_entries(path)) entries.push_back(std::move(e));
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    if (entries.size() > 1 && entries[i].subject.empty())
+      throw config::ConfigError(entries[i].body_path + ": serving several bodies, each needs its subject: give " +
+                                "the body file a top-level 'subject: NAME' (or list it in a team file)");
+    for (std::size_t j = 0; j < i; ++j)
+      if (entries[j].subject == entries[i].subject)
+        throw config::ConfigError(entries[i].body_path + ": subject '" + entries[i].subject + "' is also " +
+                                  entries[j].body_path + "'s");
+  }
+  for (const std::string& wanted : opt.subjects)
+    if (std::none_of(entries.begin(), entries.end(), [&](const auto& e) { return e.subject == wanted; }))
+      throw config::ConfigError("--subject " + wanted + ": no body file given lists this subject");
+  std::vector<ServedSubject> served;
+  std::map<std::string, std::string> node_subject;  // every node listed, to find one on two subjects
+  for (const config::SubjectEntry& e : entries) {
+    ServedSubject s{e.subject, e.body_path, {}, {}};
+    s.body = e.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(e.body_path);
+    const bool mine = (opt.subjects.empty() ||
+                       std::find(opt.subjects.begin(), opt.subjects.end(), e.subject) != opt.subjects.end()) &&
+                      (opt.share == 0 || e.share == opt.share);
+    for (const fusion::SegmentSpec& seg : s.body.segments) {
+      const auto [it, fresh] = node_subject.emplace(seg.node, e.subject);
+      if (!fresh)
+        throw config::ConfigError(e.body_path + ": node '" + seg.node + "' is on subject '" + e.subject +
+                                  "' and on subject '" + it->second + "': a node id is one sensor");
+      if (!mine) other_nodes.insert(seg.node);
+    }
+    if (!mine) continue;
+    s.calibrations = config::load_body_calibrations(e.body_path);
+    config::apply_body_alignments(e.body_path, s.body);
+    served.push_back(std::move(s));
+  }
+  if (served.empty()) throw config::ConfigError("no subject of the body files given is in this process's share");
+  return served;
+}
+
+int run_fusion(const FusionCommandOptions& opt) {
+  std::vector<ServedSubject> served;
+  auto other_nodes = std::make_shared<std::set<std::string>>();
   try {
-    body = opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
-    service_options.calibrations = config::load_body_calibrations(opt.body_path);
-    config::apply_body_alignments(opt.body_path, body);
+    served = served_subjects(opt, *other_nodes);
   } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "bsn fusion: error: %s\n", e.what());
     return 2;
   }
   if (opt.print_body) {
-    std::fputs(config::body_model_to_yaml(body).c_str(), stdout);
+    for (const ServedSubject& s : served) {
+      if (served.size() > 1) std::printf("# subject %s\n", s.subject.c_str());
+      std::fputs(config::body_model_to_yaml(s.body).c_str(), stdout);
+    }
     return 0;
   }
+  std::optional<std::uint32_t> strength = opt.ownership_strength;
+  if (opt.primary) strength = kPrimaryStrength;
+  if (opt.standby) strength = kStandbyStrength;
   DdsCommandFrame frame(opt.domain, "bsn fusion");
-  FusionService service(frame.participant(), body, service_options);
-  logging::log_info("fusing ", body.segments.size(), " segments of '", body.name.empty() ? opt.body_path : body.name,
-                    "' in domain ", opt.domain);
-  const int exit_code = frame.run_ticks(std::chrono::milliseconds(20), [&service] {
-    service.tick();
+  std::vector<std::unique_ptr<FusionService>> services;
+  std::vector<std::set<std::string>> nodes_of(served.size());  // before the bodies move into their services
+  for (std::size_t i = 0; i < served.size(); ++i)
+    for (const fusion::SegmentSpec& seg : served[i].body.segments) nodes_of[i].insert(seg.node);
+  for (std::size_t i = 0; i < served.size(); ++i) {
+    ServedSubject& s = served[i];
+    FusionService::Options service_options = opt.service;
+    service_options.calibrations = std::move(s.calibrations);
+    service_options.subject = s.subject;
+    service_options.ownership_strength = strength;
+    // A subject's nodes are also refused by the other subjects' services of this process.
+    auto elsewhere = std::make_shared<std::set<std::string>>(*other_nodes);
+    for (std::size_t j = 0; j < served.size(); ++j)
+      if (j != i) elsewhere->insert(nodes_of[j].begin(), nodes_of[j].end());
+    service_options.served_elsewhere = std::move(elsewhere);
+    if (!opt.service.process_id.empty() && served.size() > 1)
+      service_options.process_id = opt.service.process_id + "/" + s.subject;
+    const std::size_t segments = s.body.segments.size();
+    const std::string name = s.body.name.empty() ? s.body_path : s.body.name;
+    services.push_back(std::make_unique<FusionService>(frame.participant(), std::move(s.body), service_options));
+    logging::log_info("fusing ", segments, " segments of '", name, "'",
+                      s.subject.empty() ? std::string() : " (subject '" + s.subject + "')", " in domain ", opt.domain,
+                      strength ? ", exclusive ownership strength " + std::to_string(*strength) : std::string());
+  }
+  const int exit_code = frame.run_ticks(std::chrono::milliseconds(20), [&services] {
+    for (const auto& service : services) service->tick();
     return std::optional<int>();
   });
   logging::log_info("stopped");
@@ -325,7 +427,24 @@ int run_fusion(const FusionCommandOptions& opt) {
 Command fusion_command() {
   return {"fusion", "Fusion service: one filter per body segment", [](CLI::App* cmd) {
             auto opt = std::make_shared<FusionCommandOptions>();
-            cmd->add_option("--body", opt->body_path, "YAML body model (default: 7-segment lower body)");
+            cmd->add_option("--body", opt->body_paths,
+                            "YAML body model, or a team file listing subjects (repeatable: one process serves "
+                            "several subjects; default: the 7-segment lower body)");
+            cmd->add_option("--subject", opt->subjects,
+                            "serve only this subject of the body files (repeatable): this process's share");
+            cmd->add_option("--share", opt->share, "serve the subjects the team file gives this share")
+                ->check(CLI::Range(1, 1000));
+            auto* strength =
+                cmd->add_option("--ownership-strength", opt->ownership_strength,
+                                "publish estimates with EXCLUSIVE ownership of this strength: subscribers take "
+                                "each segment from the strongest live fusion (primary and standby)")
+                    ->check(CLI::Range(std::uint32_t{1}, std::uint32_t{1000000}));
+            auto* primary = cmd->add_flag("--primary", opt->primary, "--ownership-strength 100")->excludes(strength);
+            cmd->add_flag("--standby", opt->standby,
+                          "hot standby: --ownership-strength 50; fuses all along and takes over when the "
+                          "primary's liveliness lapses")
+                ->excludes(strength)
+                ->excludes(primary);
             cmd->add_flag("--print-body", opt->print_body, "print the body model in effect as YAML and exit");
             cmd->add_option("--stale-timeout", opt->service.stale_timeout_s,
                             "seconds without samples before a node is stale")

@@ -6,6 +6,8 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -24,14 +26,23 @@ class FusionService {
     double status_period_s = 1.0;
     /// Publish orientations and joint angles BEST_EFFORT instead of RELIABLE.
     bool best_effort = false;
-    std::string process_id;  ///< key on bsn/status; default "fusion@<host>:<pid>"
+    std::string process_id;  ///< key on bsn/status; default "fusion@<host>:<pid>" (+ "/<subject>")
     fusion::BodyFusion::Calibrations calibrations;
+    /// The subject: estimates and status go in its DDS partition ("" : the default partition).
+    std::string subject;
+    /// Estimates with EXCLUSIVE ownership of this strength (a primary and its hot standby; dds::WriterScope).
+    std::optional<std::uint32_t> ownership_strength;
+    /// Nodes of other subjects (of this process or of another one's share): their samples are refused before they
+    /// enter this service's raw reader and not counted as unknown.
+    std::shared_ptr<const std::set<std::string>> served_elsewhere;
   };
 
   FusionService(dds::Participant& participant, fusion::BodyModel body, Options options);
 
   /// Call periodically (every few tens of ms) from the main thread: staleness and status.
   void tick();
+
+  const std::string& subject() const { return options_.subject; }
 
  private:
   void on_raw(const bsn::RawSample& raw, const fusion::SourceId& writer);  ///< called from the DDS thread

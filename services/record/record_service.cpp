@@ -203,7 +203,9 @@ std::map<std::string, std::string> metadata(const RecordOptions& opt, const std:
           {"body_model", config::body_model_to_yaml(body)},
           {"filter_parameters", filters},
           {"calibrations", calibrations},
-          {"topics", topic_list}};
+          {"topics", topic_list},
+          // The subject (DDS partition) its estimates and status were read from; "" is the default partition.
+          {"subject", opt.subject}};
 }
 
 }  // namespace
@@ -242,7 +244,7 @@ int run_record(const RecordOptions& opt) {
   Recorder recorder(*writer);
   int exit_code = 0;
   {
-    DdsCommandFrame frame(opt.domain, "bsn record");
+    DdsCommandFrame frame(opt.domain, "bsn record", opt.subject);
     std::vector<std::shared_ptr<void>> readers;
     dds::for_each_topic([&](const auto& topic) {
       using PubSub = typename TopicPubSub<std::remove_cvref_t<decltype(topic)>>::type;
@@ -305,6 +307,7 @@ Command record_command() {
                 ->check(CLI::Range(0.05, 1.0))
                 ->capture_default_str();
             add_domain_option(cmd, opt->domain);
+            add_subject_option(cmd, opt->subject);
             return [opt] { return run_record(*opt); };
           }};
 }

@@ -18,6 +18,7 @@ struct RecordOptions {
   std::string body_path;        ///< body model whose text (and calibrations) go into the metadata
   double flush_period_s = 0.5;  ///< time between writes to disk, s (at most 1 s)
   int domain = 0;
+  std::string subject;  ///< the subject (DDS partition) of the estimates and status recorded
 };
 
 /// Returns the process exit code: 0, 1 on a write failure (disk full: the message says so), 2 on a usage error.

@@ -222,9 +222,10 @@ void Ros2Bridge::tick() {
 
 namespace {
 
-int run_ros2_bridge(int domain) {
+int run_ros2_bridge(int domain, const std::string& subject) {
   logging::set_log_identity("ros2-bridge");
-  DdsCommandFrame frame(domain, "bsn ros2-bridge");
+  // The mirror's rt/ topics keep their ROS 2 names (default partition) whichever subject it reads.
+  DdsCommandFrame frame(domain, "bsn ros2-bridge", subject);
   Ros2Bridge bridge(frame.participant());
   std::printf("bsn ros2-bridge: mirroring domain %d to ROS 2 (rt/tf, rt/bsn/joint_states, rt/bsn/<segment>/imu)\n",
               domain);
@@ -240,8 +241,10 @@ int run_ros2_bridge(int domain) {
 Command ros2_bridge_command() {
   return {"ros2-bridge", "Mirror orientations and joint angles to ROS 2 (Imu, TF, JointState)", [](CLI::App* cmd) {
             auto domain = std::make_shared<int>(0);
+            auto subject = std::make_shared<std::string>();
             add_domain_option(cmd, *domain);
-            return [domain] { return run_ros2_bridge(*domain); };
+            add_subject_option(cmd, *subject);
+            return [domain, subject] { return run_ros2_bridge(*domain, *subject); };
           }};
 }
 

@@ -90,7 +90,7 @@ int run_view(const ViewOptions& opt) {
     std::fprintf(stderr, "bsn view: error: %s\n", e.what());
     return 2;
   }
-  DdsCommandFrame frame(opt.domain, "bsn view");
+  DdsCommandFrame frame(opt.domain, "bsn view", opt.subject);
   // Under one lock: the state decides, then the message is queued to every browser (in order, as decided).
   auto pass_on = [&](auto&& decide) {
     std::lock_guard lock(state_mutex);
@@ -174,6 +174,7 @@ Command view_command() {
                         "URL carries it once (default: $BSN_VIEW_TOKEN)")
             ->check(token_problem);
         add_domain_option(cmd, opt->domain);
+        add_subject_option(cmd, opt->subject);
         return [opt] {
           if (const char* env = std::getenv("BSN_VIEW_TOKEN"); opt->token.empty() && env != nullptr && *env) {
             if (const std::string why = token_problem(env); !why.empty()) {

@@ -12,7 +12,8 @@ struct ViewOptions {
   int port = 8080;
   std::string bind = "127.0.0.1";  ///< loopback by default: --bind 0.0.0.0 shows the view to the lab network
   int domain = 0;
-  std::string token;  ///< when set, every request needs it (--token, or $BSN_VIEW_TOKEN)
+  std::string subject;  ///< the subject (DDS partition) of the estimates and status shown
+  std::string token;    ///< when set, every request needs it (--token, or $BSN_VIEW_TOKEN)
 };
 
 /// `bsn view`.

@@ -188,7 +188,8 @@ class Parser : public config::YamlReader<ConfigError> {
   BodyModel body(const YAML::Node& root) {
     if (!root || root.IsNull()) fail_at(1, "the body model file is empty");
     require_map(root, "the body model");
-    check_keys(root, {"name", "defaults", "segments"}, "the body model");
+    // `subject:` names the body's subject (DDS partition; subjects.hpp reads it).
+    check_keys(root, {"name", "subject", "defaults", "segments"}, "the body model");
     BodyModel model;
     if (root["name"]) model.name = text(root["name"], "name");
 

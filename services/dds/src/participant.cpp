@@ -41,13 +41,33 @@ const char* rejected_reason_name(SampleRejectedStatusKind kind) {
   }
 }
 
+// True if this incompatible-QoS event includes an ownership mismatch (the counts of `policies` only grow).
+bool ownership_mismatch(const QosPolicyCountSeq& policies, std::uint32_t& seen) {
+  const std::uint32_t count = policies[OWNERSHIP_QOS_POLICY_ID].count;
+  const bool changed = count != seen;
+  seen = count;
+  return changed;
+}
+
 class WriterEvents final : public DataWriterListener {
  public:
-  explicit WriterEvents(std::shared_ptr<EndpointEvents> ev) : events_(std::move(ev)) {}
+  WriterEvents(std::shared_ptr<EndpointEvents> ev, bool exclusive) : events_(std::move(ev)), exclusive_(exclusive) {}
   void on_publication_matched(DataWriter*, const PublicationMatchedStatus& s) override {
     events_->matched.store(s.current_count);
   }
   void on_offered_incompatible_qos(DataWriter*, const OfferedIncompatibleQosStatus& s) override {
+    // Every bsn reader of an estimate topic comes as a SHARED and an EXCLUSIVE twin, so one of the two never
+    // matches this writer: no mismatch. A SHARED reader of another client gets nothing from an EXCLUSIVE writer:
+    // said once.
+    if (ownership_mismatch(s.policies, ownership_seen_)) {
+      if (exclusive_ && !said_shared_reader_) {
+        said_shared_reader_ = true;
+        logging::log_info("topic ", events_->topic, ": this writer has EXCLUSIVE ownership (a primary or standby ",
+                          "fusion), so readers with SHARED ownership (DDS's default) receive nothing from it; ",
+                          "bsn's own readers match both kinds, other clients set EXCLUSIVE (docs/topics.md)");
+      }
+      return;
+    }
     if (events_->mismatch_counter) ++*events_->mismatch_counter;
     logging::log_warn("topic ", events_->topic, ": a reader requests QoS this writer does not offer (",
                       qos_policy_name(s.last_policy_id), "); that reader receives nothing from us. bsn readers use ",
@@ -56,20 +76,25 @@ class WriterEvents final : public DataWriterListener {
 
  private:
   std::shared_ptr<EndpointEvents> events_;
+  bool exclusive_;
+  std::uint32_t ownership_seen_ = 0;
+  bool said_shared_reader_ = false;
 };
 
 class ReaderEvents final : public DataReaderListener {
  public:
-  explicit ReaderEvents(std::shared_ptr<EndpointEvents> ev) : events_(std::move(ev)) {}
+  /// `twin`: one of the SHARED and EXCLUSIVE pair of an estimate topic (`exclusive`: the latter).
+  ReaderEvents(std::shared_ptr<EndpointEvents> ev, bool twin, bool exclusive)
+      : events_(std::move(ev)), twin_(twin), exclusive_(exclusive) {}
   void on_data_available(DataReader* reader) override {
     std::lock_guard lock(events_->callback_mutex);
     if (events_->on_data) events_->on_data(reader);
   }
   void on_subscription_matched(DataReader*, const SubscriptionMatchedStatus& s) override {
-    events_->matched.store(s.current_count);
+    (exclusive_ ? events_->matched_exclusive : events_->matched).store(s.current_count);
   }
   void on_liveliness_changed(DataReader*, const LivelinessChangedStatus& s) override {
-    events_->alive_writers.store(s.alive_count);
+    (exclusive_ ? events_->alive_writers_exclusive : events_->alive_writers).store(s.alive_count);
     if (s.not_alive_count_change > 0) events_->writers_lost += static_cast<std::uint64_t>(s.not_alive_count_change);
   }
   // Losses are counted from the writers' sequence numbers (count_lost), which covers these statuses too: they are
@@ -86,6 +111,8 @@ class ReaderEvents final : public DataReaderListener {
                         "bsn/status as dds_lost_samples");
   }
   void on_requested_incompatible_qos(DataReader*, const RequestedIncompatibleQosStatus& s) override {
+    // A writer of the other ownership kind matches this reader's twin.
+    if (ownership_mismatch(s.policies, ownership_seen_) && twin_) return;
     if (events_->mismatch_counter) ++*events_->mismatch_counter;
     logging::log_warn("topic ", events_->topic, ": a writer offers QoS incompatible with this reader (",
                       qos_policy_name(s.last_policy_id), "); nothing from it will arrive. A BEST_EFFORT writer never ",
@@ -94,6 +121,9 @@ class ReaderEvents final : public DataReaderListener {
 
  private:
   std::shared_ptr<EndpointEvents> events_;
+  bool twin_;
+  bool exclusive_;
+  std::uint32_t ownership_seen_ = 0;
 };
 
 // Fast DDS's own log lines (security handshake errors, XML parser errors, ...). Its default consumer prints them
@@ -208,7 +238,24 @@ bool is_secured() {
 // Topics whose writers carry one node's samples: under DDS-Security each goes in its node's partition.
 bool is_per_node(const std::string& topic) { return topic == kRawTopic.name; }
 
+// The estimates a primary and its standby both write, arbitrated by ownership.
+bool is_owned_estimate(const std::string& topic) {
+  return topic == kOrientationTopic.name || topic == kJointAnglesTopic.name;
+}
+
+// EXCLUSIVE ownership with the lease of kOwnedEstimateLease_s, MANUAL_BY_TOPIC: each sample renews its writer's
+// liveliness, and Writer::assert_liveliness between samples. Not AUTOMATIC: a Fast DDS 2.9.1 reader renews every
+// AUTOMATIC writer it tracks whenever any one of them is heard from (LivelinessManager::assert_liveliness), so a
+// killed primary's lease never lapsed while its standby kept writing, and ownership never passed.
+void make_exclusive(OwnershipQosPolicy& ownership, LivelinessQosPolicy& liveliness) {
+  ownership.kind = EXCLUSIVE_OWNERSHIP_QOS;
+  liveliness.kind = MANUAL_BY_TOPIC_LIVELINESS_QOS;
+  liveliness.lease_duration = eprosima::fastrtps::Duration_t(kOwnedEstimateLease_s);
+}
+
 }  // namespace
+
+bool is_per_subject(const std::string& topic) { return is_owned_estimate(topic) || topic == kStatusTopic.name; }
 
 // Remembers the partitions each discovered bsn/raw writer had when it was first discovered (before Fast DDS pairs
 // it with a reader: PDP::addWriterProxyData calls the listener first).
@@ -296,16 +343,42 @@ void count_undecodable(EndpointEvents& events) {
                       "(a writer with another definition of the type?); counted on bsn/status as undecodable_samples");
 }
 
-void count_lost(EndpointEvents& events, const SampleInfo& info) {
+bool new_instant_for_owner(EndpointEvents& events, const SampleInfo& info, const DataReader* reader,
+                           std::uint64_t instant_ns) {
+  if (reader->get_qos().ownership().kind != EXCLUSIVE_OWNERSHIP_QOS) return true;
+  const eprosima::fastrtps::rtps::GUID_t& writer = info.sample_identity.writer_guid();
+  auto [it, fresh] = events.delivered.try_emplace(info.instance_handle, EndpointEvents::Delivered{writer, instant_ns});
+  if (fresh) return true;
+  if (it->second.writer != writer && instant_ns <= it->second.instant_ns) {
+    if (events.superseded++ == 0)
+      logging::log_info("topic ", events.topic, ": a new owner's sample of an instant its previous owner already ",
+                        "delivered was dropped (a standby taking over behind its primary); no instant comes twice");
+    return false;
+  }
+  it->second = {writer, instant_ns};
+  return true;
+}
+
+void count_lost(EndpointEvents& events, const SampleInfo& info, const DataReader* reader) {
   const std::int64_t seq = info.sample_identity.sequence_number().to64long();
   const auto& writer = info.sample_identity.writer_guid();
+  bool first = false;
   if (events.last_writer_sequence == nullptr || events.last_writer != writer) {
-    auto [it, first] = events.last_sequence.try_emplace(writer, seq);
+    auto [it, inserted] = events.last_sequence.try_emplace(writer, seq);
     events.last_writer = writer;
     events.last_writer_sequence = &it->second;  // std::map entries stay where they are
-    if (first) return;                          // samples before a reader matches are not its losses
+    first = inserted;
   }
   std::int64_t& last = *events.last_writer_sequence;
+  if (reader->get_qos().ownership().kind == EXCLUSIVE_OWNERSHIP_QOS) {
+    auto [owner, fresh] = events.owner_of_instance.try_emplace(info.instance_handle, writer);
+    if (!fresh && owner->second != writer) {  // ownership passed: what it wrote meanwhile went to the owner's
+      owner->second = writer;
+      last = seq;
+      return;
+    }
+  }
+  if (first) return;  // samples before a reader matches are not its losses
   if (seq > last + 1) {
     const auto lost = static_cast<std::uint64_t>(seq - last - 1);
     if (events.lost_counter && (*events.lost_counter += lost) == lost)
@@ -333,6 +406,7 @@ Participant::Participant(const Options& options) {
     throw std::runtime_error("DDS domain id " + std::to_string(options.domain) + " is outside 0..232");
   }
   secured_ = is_secured();
+  subject_ = options.subject;
   if (secured_) discovery_ = std::make_unique<Discovery>();
   participant_ = DomainParticipantFactory::get_instance()->create_participant(
       static_cast<DomainId_t>(options.domain), participant_qos(options.name), discovery_.get(), StatusMask::none());
@@ -362,6 +436,16 @@ eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(const std::stri
   return t;
 }
 
+Subscriber* Participant::subscriber_in(const std::string& partition) {
+  if (auto it = partition_subscribers_.find(partition); it != partition_subscribers_.end()) return it->second;
+  SubscriberQos qos = participant_->get_default_subscriber_qos();
+  qos.partition().push_back(partition.c_str());
+  Subscriber* s = participant_->create_subscriber(qos);
+  if (!s) throw std::runtime_error("cannot create a DDS subscriber in partition " + partition);
+  partition_subscribers_[partition] = s;
+  return s;
+}
+
 Publisher* Participant::publisher_in(const std::string& partition) {
   if (auto it = partition_publishers_.find(partition); it != partition_publishers_.end()) return it->second;
   PublisherQos qos = participant_->get_default_publisher_qos();
@@ -375,19 +459,29 @@ Publisher* Participant::publisher_in(const std::string& partition) {
 // Writers and readers start from their publisher's or subscriber's default QoS (the XML default profile, if
 // any) with bsn's delivery of the topic on top; a profile named after the topic replaces both.
 DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
-                                       std::shared_ptr<EndpointEvents> events, const std::string& node) {
+                                       std::shared_ptr<EndpointEvents> events, const std::string& node,
+                                       const WriterScope& scope) {
   Publisher* publisher = publisher_;
+  const std::string subject = scope.subject.value_or(subject_);
   if (secured_ && is_per_node(topic->get_name())) {
     if (node.empty()) throw std::runtime_error("a secured writer on " + topic->get_name() + " needs its node id");
     std::lock_guard lock(mutex_);
     publisher = publisher_in(node);
+  } else if (!subject.empty() && is_per_subject(topic->get_name())) {
+    std::lock_guard lock(mutex_);
+    publisher = publisher_in(subject);
   }
   DataWriterQos qos = publisher->get_default_datawriter_qos();
   if (publisher->get_datawriter_qos_from_profile(topic->get_name(), qos) != ReturnCode_t::RETCODE_OK)
     qos = writer_qos(delivery, publisher->get_default_datawriter_qos());
+  const bool exclusive = scope.ownership_strength && is_owned_estimate(topic->get_name());
+  if (exclusive) {
+    make_exclusive(qos.ownership(), qos.liveliness());
+    qos.ownership_strength().value = *scope.ownership_strength;
+  }
   events->topic = topic->get_name();
   events->mismatch_counter = &qos_mismatches_;
-  auto listener = std::make_unique<WriterEvents>(events);
+  auto listener = std::make_unique<WriterEvents>(events, exclusive);
   DataWriter* w = publisher->create_datawriter(topic, qos, listener.get(), StatusMask::all());
   if (!w) {
     throw std::runtime_error("cannot create a DDS writer on " + topic->get_name() +
@@ -399,11 +493,12 @@ DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, Top
 }
 
 void Participant::create_reader(eprosima::fastdds::dds::TopicDescription* topic, TopicQos delivery,
-                                std::shared_ptr<EndpointEvents> events) {
+                                std::shared_ptr<EndpointEvents> events, const std::optional<std::string>& subject) {
   // A filtered topic's delivery and profile are its source topic's.
   const auto* filtered = dynamic_cast<ContentFilteredTopic*>(topic);
   const std::string name = filtered != nullptr ? filtered->get_related_topic()->get_name() : topic->get_name();
   Subscriber* subscriber = subscriber_;
+  const std::string partition = subject.value_or(subject_);
   if (secured_ && is_per_node(name)) {
     // Secured writers of bsn/raw are each in their node's partition: read them all ("*" also matches the default).
     std::lock_guard lock(mutex_);
@@ -414,16 +509,27 @@ void Participant::create_reader(eprosima::fastdds::dds::TopicDescription* topic,
       if (!any_partition_subscriber_) throw std::runtime_error("cannot create a DDS subscriber of every partition");
     }
     subscriber = any_partition_subscriber_;
+  } else if (!partition.empty() && is_per_subject(name)) {
+    std::lock_guard lock(mutex_);
+    subscriber = subscriber_in(partition);
   }
-  DataReaderQos qos = subscriber->get_default_datareader_qos();
-  if (subscriber->get_datareader_qos_from_profile(name, qos) != ReturnCode_t::RETCODE_OK)
-    qos = reader_qos(delivery, subscriber->get_default_datareader_qos());
   events->topic = name;
   events->mismatch_counter = &qos_mismatches_;
   events->undecodable_counter = &undecodable_samples_;
   events->lost_counter = &lost_samples_;
   events->rejected_counter = &rejected_samples_;
-  auto listener = std::make_unique<ReaderEvents>(events);
+  const bool twin = is_owned_estimate(name);
+  create_one_reader(subscriber, topic, name, delivery, events, false);
+  if (twin) create_one_reader(subscriber, topic, name, delivery, events, true);
+}
+
+void Participant::create_one_reader(Subscriber* subscriber, TopicDescription* topic, const std::string& name,
+                                    TopicQos delivery, std::shared_ptr<EndpointEvents> events, bool exclusive) {
+  DataReaderQos qos = subscriber->get_default_datareader_qos();
+  if (subscriber->get_datareader_qos_from_profile(name, qos) != ReturnCode_t::RETCODE_OK)
+    qos = reader_qos(delivery, subscriber->get_default_datareader_qos());
+  if (exclusive) make_exclusive(qos.ownership(), qos.liveliness());
+  auto listener = std::make_unique<ReaderEvents>(events, is_owned_estimate(name), exclusive);
   DataReader* r = subscriber->create_datareader(topic, qos, listener.get(), StatusMask::all());
   if (!r) throw std::runtime_error("cannot create a DDS reader on " + name + refused_by_permissions());
   std::lock_guard lock(mutex_);

@@ -20,6 +20,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "bsn/dds/topics.hpp"
@@ -32,8 +33,10 @@ namespace bsn::dds {
 struct EndpointEvents {
   std::string topic;
   std::atomic<int> matched{0};
+  std::atomic<int> matched_exclusive{0};  ///< reader of an estimate topic: writers its EXCLUSIVE twin matched
   std::atomic<std::uint64_t>* mismatch_counter = nullptr;
   std::atomic<int> alive_writers{0};                          ///< reader: matched writers whose liveliness holds
+  std::atomic<int> alive_writers_exclusive{0};                ///< of the EXCLUSIVE twin
   std::atomic<std::uint64_t> writers_lost{0};                 ///< reader: times a matched writer lost its liveliness
   std::atomic<std::uint64_t>* undecodable_counter = nullptr;  ///< samples whose bytes did not decode (dropped)
   std::atomic<std::uint64_t>* lost_counter = nullptr;         ///< samples sent to this reader that never came
@@ -46,14 +49,32 @@ struct EndpointEvents {
   /// writer, so most samples need no look-up.
   eprosima::fastrtps::rtps::GUID_t last_writer;
   std::int64_t* last_writer_sequence = nullptr;
+  /// EXCLUSIVE twin: per instance, the writer of the last sample taken. A writer's samples of an instance it did
+  /// not own were dropped by DDS, not lost: the first sample after an ownership change counts no gap.
+  std::map<eprosima::fastrtps::rtps::InstanceHandle_t, eprosima::fastrtps::rtps::GUID_t> owner_of_instance;
+  /// EXCLUSIVE twin: per instance, the writer and sensor instant (timestamp_ns) of the last sample delivered.
+  struct Delivered {
+    eprosima::fastrtps::rtps::GUID_t writer;
+    std::uint64_t instant_ns = 0;
+  };
+  std::map<eprosima::fastrtps::rtps::InstanceHandle_t, Delivered> delivered;
+  std::uint64_t superseded = 0;  ///< samples of instants already delivered by the instance's previous owner
   std::mutex callback_mutex;
   std::function<void(eprosima::fastdds::dds::DataReader*)> on_data;
 };
 
 /// Counts an undecodable sample on a reader and logs the first one of each reader.
 void count_undecodable(EndpointEvents& events);
-/// Counts the samples between the last one taken from the same writer and this one as lost.
-void count_lost(EndpointEvents& events, const eprosima::fastdds::dds::SampleInfo& info);
+/// False for a sample an EXCLUSIVE reader must not deliver: one of a sensor instant at or before the last one
+/// delivered of its instance by another writer (a standby that lagged its primary when it took over, or the first
+/// samples before the strongest writer's arrived), so that no instant comes twice or out of order across a handover.
+bool new_instant_for_owner(EndpointEvents& events, const eprosima::fastdds::dds::SampleInfo& info,
+                           const eprosima::fastdds::dds::DataReader* reader, std::uint64_t instant_ns);
+
+/// Counts the samples between the last one taken from the same writer and this one as lost (`reader`: the one that
+/// took it, for its ownership).
+void count_lost(EndpointEvents& events, const eprosima::fastdds::dds::SampleInfo& info,
+                const eprosima::fastdds::dds::DataReader* reader);
 
 /// A typed writer. Valid while its Participant lives.
 template <class T>
@@ -72,6 +93,9 @@ class Writer {
   bool unheard() const { return volatile_ && matched() == 0; }
   /// The writer's GUID: what readers see as the sample's writer (SampleInfo::sample_identity.writer_guid()).
   eprosima::fastrtps::rtps::GUID_t guid() const { return writer_->guid(); }
+  /// An owned estimate writer (WriterScope::ownership_strength) is alive while it writes or asserts this at least
+  /// once per kOwnedEstimateLease_s.
+  void assert_liveliness() { writer_->assert_liveliness(); }
 
  private:
   eprosima::fastdds::dds::DataWriter* writer_;
@@ -91,20 +115,44 @@ class Reader {
   }
   Reader(const Reader&) = delete;
   Reader& operator=(const Reader&) = delete;
-  int matched() const { return events_->matched.load(); }
+  int matched() const { return events_->matched.load() + events_->matched_exclusive.load(); }
   /// Matched writers whose liveliness holds, and how often one lost it (its process died or hangs).
-  int alive_writers() const { return events_->alive_writers.load(); }
+  int alive_writers() const { return events_->alive_writers.load() + events_->alive_writers_exclusive.load(); }
   std::uint64_t writers_lost() const { return events_->writers_lost.load(); }
 
  private:
   std::shared_ptr<EndpointEvents> events_;
 };
 
+/// The liveliness lease of estimates written with EXCLUSIVE ownership, s: the lease bsn's readers request (DDS
+/// tracks a writer's liveliness with the reader's lease) and the writers offer, MANUAL_BY_TOPIC (each sample, or
+/// Writer::assert_liveliness, renews it). A standby takes an instance over within about this long after its
+/// owner's process died (docs/topics.md, ownership).
+inline constexpr double kOwnedEstimateLease_s = 0.05;
+
+/// Where a writer publishes and who owns the instances it writes.
+struct WriterScope {
+  /// DDS partition of a subject's estimates and status (bsn/orientation, bsn/joint_angles, bsn/status); unset:
+  /// the participant's subject. Other topics ignore it.
+  std::optional<std::string> subject;
+  /// Estimate topics (bsn/orientation, bsn/joint_angles): EXCLUSIVE ownership with this strength and a liveliness
+  /// lease of kOwnedEstimateLease_s, so that a reader takes each instance from the strongest live writer (a
+  /// primary and its hot standby); its owner asserts the writer's liveliness between samples. Unset: SHARED, as
+  /// every other writer.
+  std::optional<std::uint32_t> ownership_strength;
+};
+
+/// True for the topics written per subject, in the subject's DDS partition.
+bool is_per_subject(const std::string& topic);
+
 class Participant {
  public:
   struct Options {
     int domain = 0;            ///< DDS domain id (0..232); every test uses its own
     std::string name = "bsn";  ///< participant name shown by DDS tools
+    /// The subject whose estimates and status this participant's endpoints write and read: the DDS partition of
+    /// that name (docs/design.md section 3). "" is the default partition, which a single-body fusion uses.
+    std::string subject = "";
   };
 
   /// Throws std::runtime_error if the participant cannot be created.
@@ -118,12 +166,14 @@ class Participant {
   /// `node`: the node whose samples a bsn/raw writer carries. Under DDS-Security the writer goes in the DDS
   /// partition of that name, which the identity's permissions must allow (make-pki.sh NAME:sensor:NODES), and fusion
   /// takes a node's samples only from writers in its partition. Ignored on an open network and for other topics.
+  /// `scope`: the subject partition and the ownership of its estimates (WriterScope).
   template <class PubSub>
   std::unique_ptr<Writer<typename PubSub::type>> make_writer(const Topic<PubSub>& topic,
                                                              std::optional<TopicQos> delivery = {},
-                                                             const std::string& node = "") {
+                                                             const std::string& node = "",
+                                                             const WriterScope& scope = {}) {
     auto events = std::make_shared<EndpointEvents>();
-    auto* w = create_writer(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events, node);
+    auto* w = create_writer(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events, node, scope);
     return std::make_unique<Writer<typename PubSub::type>>(w, events);
   }
 
@@ -136,12 +186,16 @@ class Participant {
   using Admission = std::function<bool(const T&)>;
 
   /// A reader on `topic` (delivery and XML profile as for writers) that calls `on_sample` for every valid sample
-  /// that `admit` (if given) lets in.
+  /// that `admit` (if given) lets in. A per-subject topic is read in `subject`'s partition (unset: the
+  /// participant's subject). An estimate topic (bsn/orientation, bsn/joint_angles) gets a second, EXCLUSIVE
+  /// reader beside the SHARED one (DDS matches a writer only with a reader of its own ownership kind): every writer
+  /// is read by one of the two, and of a primary and its standby only the live owner's samples arrive.
   template <class PubSub>
   std::unique_ptr<Reader<typename PubSub::type>> make_reader(
       const Topic<PubSub>& topic,
       std::function<void(const typename PubSub::type&, const eprosima::fastdds::dds::SampleInfo&)> on_sample,
-      std::optional<TopicQos> delivery = {}, Admission<typename PubSub::type> admit = {}) {
+      std::optional<TopicQos> delivery = {}, Admission<typename PubSub::type> admit = {},
+      const std::optional<std::string>& subject = {}) {
     auto events = std::make_shared<EndpointEvents>();
     // One sample object for the reader's life (on_data runs under the callback mutex): its strings and sequences
     // keep their storage from one sample to the next.
@@ -149,11 +203,15 @@ class Participant {
                        sample = typename PubSub::type()](eprosima::fastdds::dds::DataReader* reader) mutable {
       eprosima::fastdds::dds::SampleInfo info;
       while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
-        count_lost(*events_ptr, info);
+        count_lost(*events_ptr, info, reader);
         if (!info.valid_data) continue;
         if (last_deserialize_failed()) {  // bytes no bsn type can hold (a foreign or broken writer): dropped
           count_undecodable(*events_ptr);
           continue;
+        }
+        using Sample = typename PubSub::type;
+        if constexpr (std::is_same_v<Sample, bsn::Orientation> || std::is_same_v<Sample, bsn::JointAngles>) {
+          if (!new_instant_for_owner(*events_ptr, info, reader, sample.timestamp_ns())) continue;
         }
         cb(sample, info);
       }
@@ -169,7 +227,7 @@ class Participant {
                                  return admit(sample);
                                });
     }
-    create_reader(source, delivery.value_or(topic.qos), events);
+    create_reader(source, delivery.value_or(topic.qos), events, subject);
     return std::make_unique<Reader<typename PubSub::type>>(events);
   }
 
@@ -207,10 +265,16 @@ class Participant {
   eprosima::fastdds::dds::TopicDescription* admitting_topic(eprosima::fastdds::dds::Topic* topic,
                                                             PayloadAdmission admit);
   eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
-                                                    std::shared_ptr<EndpointEvents> events, const std::string& node);
-  eprosima::fastdds::dds::Publisher* publisher_in(const std::string& partition);  ///< under mutex_
+                                                    std::shared_ptr<EndpointEvents> events, const std::string& node,
+                                                    const WriterScope& scope);
+  eprosima::fastdds::dds::Publisher* publisher_in(const std::string& partition);    ///< under mutex_
+  eprosima::fastdds::dds::Subscriber* subscriber_in(const std::string& partition);  ///< under mutex_
+  /// The reader (and for an estimate topic its EXCLUSIVE twin) on `topic`.
   void create_reader(eprosima::fastdds::dds::TopicDescription* topic, TopicQos delivery,
-                     std::shared_ptr<EndpointEvents> events);
+                     std::shared_ptr<EndpointEvents> events, const std::optional<std::string>& subject);
+  void create_one_reader(eprosima::fastdds::dds::Subscriber* subscriber,
+                         eprosima::fastdds::dds::TopicDescription* topic, const std::string& name, TopicQos delivery,
+                         std::shared_ptr<EndpointEvents> events, bool exclusive);
 
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
@@ -221,7 +285,9 @@ class Participant {
   std::vector<std::unique_ptr<eprosima::fastdds::dds::DataReaderListener>> reader_listeners_;
   std::vector<eprosima::fastdds::dds::DataReader*> readers_;
   bool secured_ = false;
+  std::string subject_;  ///< Options::subject
   std::map<std::string, eprosima::fastdds::dds::Publisher*> partition_publishers_;
+  std::map<std::string, eprosima::fastdds::dds::Subscriber*> partition_subscribers_;
   eprosima::fastdds::dds::Subscriber* any_partition_subscriber_ = nullptr;  ///< secured bsn/raw readers
   struct Discovery;
   std::unique_ptr<Discovery> discovery_;  ///< the partitions of discovered bsn/raw writers (secured only)
