@@ -25,9 +25,7 @@ struct EvalOptions {
   std::string scenario_dir;          ///< where fan_a..fan_e.yaml are ("" = default_scenario_dir())
   std::string body_path;             ///< a body: score segments and joints (run_body_eval)
   std::string align_window = "all";  ///< with a body: the window of the per-segment alignment
-  std::string format = "auto";       ///< with a body: the recordings' format, units and DIODEM IMU
-  std::vector<std::string> units;
-  std::string imu = "rigid";
+  ImportSelection import;            ///< with a body: how the recordings are read
 };
 
 // The scenarios of this checkout when bsn runs from its build tree, else those installed beside the program
@@ -40,7 +38,7 @@ std::string default_scenario_dir() {
 namespace fs = std::filesystem;
 
 int run_eval(const EvalOptions& opt) {
-  if (opt.body_path.empty() && (opt.format != "auto" || !opt.units.empty() || opt.imu != "rigid")) {
+  if (opt.body_path.empty() && !opt.import.is_default()) {
     std::fprintf(stderr, "bsn eval: error: --format, --unit and --imu go with --body (the importers' options)\n");
     return 2;
   }
@@ -56,9 +54,7 @@ int run_eval(const EvalOptions& opt) {
     b.align_window = opt.align_window;
     b.json = opt.json;
     b.plot_path = opt.plot_path;
-    b.format = opt.format;
-    b.units = opt.units;
-    b.imu = opt.imu;
+    b.import = opt.import;
     return run_body_eval(b);
   }
   std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
@@ -212,7 +208,7 @@ Command eval_command() {
             cmd->add_option("--align-window", opt->align_window,
                             "with --body: per-segment constant alignment fitted over all, none or A:B (seconds)")
                 ->capture_default_str();
-            add_import_options(cmd, opt->format, opt->units, opt->imu);  // with --body
+            add_import_options(cmd, opt->import);  // with --body
             cmd->add_option("--plot", opt->plot_path, "write an SVG image of the total error over time per filter");
             cmd->add_flag("--standard-tests", opt->standard_tests,
                           "run Fan et al. 2018's tests A-E on the simulator and print their Table 5 with grades");

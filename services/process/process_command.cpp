@@ -140,17 +140,17 @@ void read_session(const std::string& path, ProcessInput& in) {
 // node or its segment in the body.
 std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const fusion::BodyModel& body,
                             std::vector<std::string>& notes) {
-  if (opt.imu != "rigid" && opt.imu != "nonrigid")
-    throw UsageError("--imu must be rigid or nonrigid, not '" + opt.imu + "'");
+  if (opt.import.imu != "rigid" && opt.import.imu != "nonrigid")
+    throw UsageError("--imu must be rigid or nonrigid, not '" + opt.import.imu + "'");
   io::ImportOptions import;
-  import.imu = opt.imu;
-  for (const std::string& u : opt.units) io::add_unit_option(import.units, u);
+  import.imu = opt.import.imu;
+  for (const std::string& u : opt.import.units) io::add_unit_option(import.units, u);
   auto wanted = [&](const std::string& name) {
     return std::any_of(body.segments.begin(), body.segments.end(),
                        [&](const fusion::SegmentSpec& s) { return s.node == name || s.name == name; });
   };
   std::vector<std::string> left_out;
-  std::vector<io::ImportedNode> nodes = io::import_recordings(opt.input, opt.format, import, wanted, &left_out);
+  std::vector<io::ImportedNode> nodes = io::import_recordings(opt.input, opt.import.format, import, wanted, &left_out);
   for (std::size_t i = 0; i < body.segments.size(); ++i) {
     const fusion::SegmentSpec& spec = body.segments[i];
     auto it = std::find_if(nodes.begin(), nodes.end(), [&](const io::ImportedNode& n) { return n.name == spec.node; });
@@ -520,15 +520,15 @@ int run_process(const ProcessOptions& opt) {
   }
 }
 
-void add_import_options(CLI::App* cmd, std::string& format, std::vector<std::string>& units, std::string& imu) {
+void add_import_options(CLI::App* cmd, ImportSelection& import) {
   std::string formats = "auto";
   for (const io::RecordingImporter* i : io::recording_importers()) formats += ", " + i->name();
-  cmd->add_option("--format", format, "the recordings' format: " + formats + " (docs/importers.md)")
+  cmd->add_option("--format", import.format, "the recordings' format: " + formats + " (docs/importers.md)")
       ->capture_default_str();
-  cmd->add_option("--unit", units,
+  cmd->add_option("--unit", import.units,
                   "QUANTITY=UNIT overriding the format's unit: acc (m/s^2, g), gyr (rad/s, deg/s), mag (uT, nT, G, "
                   "au, au:K), time (s, ms, us, ns); repeatable");
-  cmd->add_option("--imu", imu, "DIODEM: which IMU of each segment, rigid or nonrigid")->capture_default_str();
+  cmd->add_option("--imu", import.imu, "DIODEM: which IMU of each segment, rigid or nonrigid")->capture_default_str();
 }
 
 Command process_command() {
@@ -539,7 +539,7 @@ Command process_command() {
                             "session file (bsn record), folder of per-node recordings (<node>.hdf5/.csv), a recording "
                             "file or a DIODEM trial")
                 ->required();
-            add_import_options(cmd, opt->format, opt->units, opt->imu);
+            add_import_options(cmd, opt->import);
             cmd->add_option("--body", opt->body_path, "YAML body model (default: the one recorded in the session)");
             cmd->add_option("--out", opt->out, "session file to write (.h5)")->required();
             cmd->add_flag("--overwrite", opt->overwrite, "replace an existing output file");
@@ -617,9 +617,7 @@ int body_eval(const BodyEvalOptions& opt) {
   p.input = opt.input;
   p.body_path = opt.body_path;
   p.filters = opt.filters;
-  p.format = opt.format;
-  p.units = opt.units;
-  p.imu = opt.imu;
+  p.import = opt.import;
   std::vector<std::string> notes;
   fusion::BodyModel body;
   ProcessInput in = load_input(p, body, notes);

@@ -10,13 +10,19 @@
 
 namespace bsn::services {
 
-struct ProcessOptions {
-  std::string input;  ///< a session file, a recording file, or a folder of per-node recordings (or a DIODEM trial)
+/// How the recordings are read: the importers' options (--format, --unit, --imu).
+struct ImportSelection {
   std::string format = "auto";     ///< the recordings' format (bsn/io/importers.hpp); auto: by each file
   std::vector<std::string> units;  ///< QUANTITY=UNIT overriding a format's units (--unit)
   std::string imu = "rigid";       ///< DIODEM: rigid or nonrigid
-  std::string body_path;           ///< "" = the session's recorded body model (a folder needs one)
-  std::string out;                 ///< session file to write
+  bool is_default() const { return format == "auto" && units.empty() && imu == "rigid"; }
+};
+
+struct ProcessOptions {
+  std::string input;  ///< a session file, a recording file, or a folder of per-node recordings (or a DIODEM trial)
+  ImportSelection import;
+  std::string body_path;  ///< "" = the session's recorded body model (a folder needs one)
+  std::string out;        ///< session file to write
   bool overwrite = false;
   std::vector<std::string> filters;            ///< NAME[:k=v,...] for every segment (the last one given wins)
   std::vector<std::string> calibration_files;  ///< calibration files (`bsn calibrate`), applied from the first sample
@@ -40,9 +46,7 @@ int run_process(const ProcessOptions& options);
 struct BodyEvalOptions {
   std::string input;  ///< as ProcessOptions::input
   std::string body_path;
-  std::string format = "auto";     ///< as ProcessOptions
-  std::vector<std::string> units;  ///< as ProcessOptions
-  std::string imu = "rigid";       ///< as ProcessOptions
+  ImportSelection import;
   std::vector<std::string> filters;
   std::string align_window = "all";  ///< all, none, or A:B (seconds from the first sample)
   bool json = false;
@@ -51,7 +55,7 @@ struct BodyEvalOptions {
 int run_body_eval(const BodyEvalOptions& options);
 
 /// --format, --unit and --imu (the importers' options) on a command.
-void add_import_options(CLI::App* cmd, std::string& format, std::vector<std::string>& units, std::string& imu);
+void add_import_options(CLI::App* cmd, ImportSelection& import);
 
 Command process_command();
 

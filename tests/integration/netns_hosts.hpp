@@ -34,6 +34,13 @@ inline void remove_stale_namespaces() {
   }
 }
 
+/// Why this machine cannot run network-namespace hosts ("" when it can): they need root and iproute2.
+inline std::string namespaces_unavailable() {
+  if (::geteuid() != 0) return "network namespaces need root; running as uid " + std::to_string(::geteuid());
+  if (!run("command -v ip") || !run("command -v bridge")) return "iproute2 (ip, bridge) is not installed";
+  return "";
+}
+
 /// Hosts as network namespaces on one bridge; host i has address 10.231.0.(i+1)/24 on its eth0.
 class Hosts {
  public:

@@ -350,8 +350,7 @@ class StandbySweep : public ProcessTest {
  protected:
   void SetUp() override {
     ProcessTest::SetUp();
-    if (::geteuid() != 0) GTEST_SKIP() << "network namespaces need root; running as uid " << ::geteuid();
-    if (!run("command -v ip") || !run("command -v bridge")) GTEST_SKIP() << "iproute2 (ip, bridge) is not installed";
+    if (const std::string why = namespaces_unavailable(); !why.empty()) GTEST_SKIP() << why;
     remove_stale_namespaces();
     hosts_ = std::make_unique<Hosts>(std::vector<std::string>{"sensors", "fusion1", "fusion2", "standby", "viewer"});
     ASSERT_TRUE(hosts_->ok()) << "could not create the namespaces and the bridge";
