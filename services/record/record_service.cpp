@@ -130,6 +130,12 @@ class Recorder {
     return line + buf;
   }
 
+  /// Streams (keys) of topic `topic` that delivered a sample so far.
+  std::size_t stream_count(std::size_t topic) {
+    std::lock_guard lock(mutex_);
+    return topics_[topic].streams.size();
+  }
+
   std::uint64_t total_samples() {
     std::lock_guard lock(mutex_);
     std::uint64_t n = 0;
@@ -164,10 +170,8 @@ std::string host_name() {
 }
 
 // The metadata: what produced the recording and with which body model, filters and calibrations.
-std::map<std::string, std::string> metadata(const RecordOptions& opt, const std::vector<std::string>& topics,
-                                            std::uint64_t start_ns) {
-  const fusion::BodyModel body =
-      opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
+std::map<std::string, std::string> metadata(const RecordOptions& opt, const fusion::BodyModel& body,
+                                            const std::vector<std::string>& topics, std::uint64_t start_ns) {
   std::string filters;
   for (const auto& s : body.segments) {
     filters += s.name + ": " + s.filter.name;
@@ -232,8 +236,10 @@ int run_record(const RecordOptions& opt) {
   std::signal(SIGXFSZ, SIG_IGN);
   const std::uint64_t start_ns = unix_ns();
   std::unique_ptr<io::SessionWriter> writer;
+  fusion::BodyModel body;
   try {
-    writer = std::make_unique<io::SessionWriter>(opt.out, opt.overwrite, metadata(opt, topics, start_ns));
+    body = opt.body_path.empty() ? fusion::default_lower_body() : config::load_body_model(opt.body_path);
+    writer = std::make_unique<io::SessionWriter>(opt.out, opt.overwrite, metadata(opt, body, topics, start_ns));
   } catch (const config::ConfigError& e) {
     std::fprintf(stderr, "bsn record: error: %s\n", e.what());
     return 2;
@@ -246,10 +252,12 @@ int run_record(const RecordOptions& opt) {
   {
     DdsCommandFrame frame(opt.domain, "bsn record", opt.subject);
     std::vector<std::shared_ptr<void>> readers;
+    std::vector<std::size_t> per_segment;  ///< the recorded topics with one stream per segment (raw, orientation)
     dds::for_each_topic([&](const auto& topic) {
       using PubSub = typename TopicPubSub<std::remove_cvref_t<decltype(topic)>>::type;
       if (std::find(topics.begin(), topics.end(), topic.name) == topics.end()) return;
       const std::size_t index = recorder.add_topic(topic.name);
+      if (topic.name == dds::kRawTopic.name || topic.name == dds::kOrientationTopic.name) per_segment.push_back(index);
       readers.push_back(frame.participant().make_reader(
           topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); }));
     });
@@ -258,9 +266,34 @@ int run_record(const RecordOptions& opt) {
     const auto start = Clock::now();
     auto last_flush = start;
     auto last_progress = start;
+    // --duration counts from the first sample recorded, so a trial holds what was asked for however long discovery
+    // took; with no sample at all it ends at the same time after the start. With --body it counts from when every
+    // segment's stream of bsn/raw and bsn/orientation flows (each node and the fusion are discovered one by one, up
+    // to seconds apart), or from kStreamsWait_s after the first sample, with a warning naming what was missing.
+    constexpr double kStreamsWait_s = 10.0;
+    std::optional<Clock::time_point> first_sample, trial_start;
+    auto every_stream_flows = [&] {
+      if (opt.body_path.empty()) return true;
+      for (const std::size_t t : per_segment)
+        if (recorder.stream_count(t) < body.segments.size()) return false;
+      return true;
+    };
     exit_code = frame.run_ticks(std::chrono::milliseconds(50), [&]() -> std::optional<int> {
       const auto now = Clock::now();
       const double elapsed = std::chrono::duration<double>(now - start).count();
+      if (!first_sample && recorder.total_samples() > 0) first_sample = now;
+      if (first_sample && !trial_start) {
+        const bool waited_enough = std::chrono::duration<double>(now - *first_sample).count() >= kStreamsWait_s;
+        if (every_stream_flows() || waited_enough) {
+          trial_start = now;
+          if (!every_stream_flows())
+            logging::log_warn("not every segment of the body sent bsn/raw and bsn/orientation within ", kStreamsWait_s,
+                              " s of the first sample; the duration counts from now");
+        }
+      }
+      const double recorded = trial_start    ? std::chrono::duration<double>(now - *trial_start).count()
+                              : first_sample ? 0.0
+                                             : elapsed;
       if (now - last_flush >= std::chrono::duration<double>(opt.flush_period_s)) {
         last_flush = now;
         try {
@@ -276,7 +309,7 @@ int run_record(const RecordOptions& opt) {
         std::fprintf(stderr, "\r%s", recorder.progress_line(elapsed).c_str());
         std::fflush(stderr);
       }
-      if (opt.duration_s > 0.0 && elapsed >= opt.duration_s) return 0;
+      if (opt.duration_s > 0.0 && recorded >= opt.duration_s) return 0;
       return std::nullopt;
     });
     if (terminal) std::fputc('\n', stderr);
@@ -295,21 +328,24 @@ int run_record(const RecordOptions& opt) {
 }
 
 Command record_command() {
-  return {"record", "Record bsn topics to an HDF5 session file", [](CLI::App* cmd) {
-            auto opt = std::make_shared<RecordOptions>();
-            cmd->add_option("--out", opt->out, "session file to write (.h5)")->required();
-            cmd->add_option("--topic", opt->topics, "record only this topic (repeatable; default: every topic)");
-            cmd->add_option("--duration", opt->duration_s, "stop after S seconds (default: at Ctrl-C)")
-                ->check(CLI::NonNegativeNumber);
-            cmd->add_flag("--overwrite", opt->overwrite, "replace an existing file");
-            cmd->add_option("--body", opt->body_path, "body model stored in the metadata (default: the lower body)");
-            cmd->add_option("--flush-period", opt->flush_period_s, "seconds between writes to disk (0.05..1)")
-                ->check(CLI::Range(0.05, 1.0))
-                ->capture_default_str();
-            add_domain_option(cmd, opt->domain);
-            add_subject_option(cmd, opt->subject);
-            return [opt] { return run_record(*opt); };
-          }};
+  return {
+      "record", "Record bsn topics to an HDF5 session file", [](CLI::App* cmd) {
+        auto opt = std::make_shared<RecordOptions>();
+        cmd->add_option("--out", opt->out, "session file to write (.h5)")->required();
+        cmd->add_option("--topic", opt->topics, "record only this topic (repeatable; default: every topic)");
+        cmd->add_option(
+               "--duration", opt->duration_s,
+               "stop S seconds after the first sample (with --body: after every segment's first) (default: at Ctrl-C)")
+            ->check(CLI::NonNegativeNumber);
+        cmd->add_flag("--overwrite", opt->overwrite, "replace an existing file");
+        cmd->add_option("--body", opt->body_path, "body model stored in the metadata (default: the lower body)");
+        cmd->add_option("--flush-period", opt->flush_period_s, "seconds between writes to disk (0.05..1)")
+            ->check(CLI::Range(0.05, 1.0))
+            ->capture_default_str();
+        add_domain_option(cmd, opt->domain);
+        add_subject_option(cmd, opt->subject);
+        return [opt] { return run_record(*opt); };
+      }};
 }
 
 }  // namespace bsn::services
