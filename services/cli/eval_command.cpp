@@ -20,6 +20,7 @@ struct EvalOptions {
   std::vector<std::string> inputs;   ///< files (.hdf5 BROAD layout, .csv) or folders of them
   std::vector<std::string> filters;  ///< "name" or "name:key=value,...", or "all"; empty = all
   bool json = false;                 ///< print the JSON object instead of the table
+  bool markdown = false;             ///< print Markdown tables for the manual instead of the table
   std::string plot_path;             ///< write an SVG of error over time here ("" = no plot)
   bool standard_tests = false;       ///< run Fan et al. 2018's tests A-E on the simulator instead of recordings
   std::string scenario_dir;          ///< where fan_a..fan_e.yaml are ("" = default_scenario_dir())
@@ -43,6 +44,10 @@ int run_eval(const EvalOptions& opt) {
     return 2;
   }
   if (!opt.body_path.empty()) {
+    if (opt.markdown) {
+      std::fprintf(stderr, "bsn eval: error: --markdown prints the filters' tables; with --body use --json\n");
+      return 2;
+    }
     if (opt.inputs.size() != 1) {
       std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");
       return 2;
@@ -87,7 +92,9 @@ int run_eval(const EvalOptions& opt) {
       std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
       return 2;
     }
-    std::fputs(opt.json ? eval::standard_tests_json(results).c_str() : eval::standard_tests_table(results).c_str(),
+    std::fputs(opt.json       ? eval::standard_tests_json(results).c_str()
+               : opt.markdown ? eval::standard_tests_markdown(results).c_str()
+                              : eval::standard_tests_table(results).c_str(),
                stdout);
     int exit_code = 0;
     std::vector<eval::TrialResult> trials;
@@ -106,7 +113,7 @@ int run_eval(const EvalOptions& opt) {
         std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
         return 1;
       }
-      if (!opt.json) std::printf("plot: %s\n", opt.plot_path.c_str());
+      if (!opt.json && !opt.markdown) std::printf("plot: %s\n", opt.plot_path.c_str());
     }
     return exit_code;
   }
@@ -155,7 +162,10 @@ int run_eval(const EvalOptions& opt) {
   }
   bar.finish();
 
-  std::fputs(opt.json ? eval::to_json(results).c_str() : eval::to_table(results).c_str(), stdout);
+  std::fputs(opt.json       ? eval::to_json(results).c_str()
+             : opt.markdown ? eval::to_markdown(results).c_str()
+                            : eval::to_table(results).c_str(),
+             stdout);
   if (!opt.plot_path.empty()) {
     std::ofstream out(opt.plot_path);
     out << eval::to_svg(results);
@@ -163,7 +173,7 @@ int run_eval(const EvalOptions& opt) {
       std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
       return 1;
     }
-    if (!opt.json) std::printf("plot: %s\n", opt.plot_path.c_str());
+    if (!opt.json && !opt.markdown) std::printf("plot: %s\n", opt.plot_path.c_str());
   }
   return exit_code;
 }
@@ -201,7 +211,10 @@ Command eval_command() {
             cmd->add_option("inputs", opt->inputs, "recordings (.hdf5 in BROAD layout, .csv) or folders of them");
             cmd->add_option("--filter", opt->filters, "NAME or NAME:key=value,...; repeatable; 'all' = every filter")
                 ->take_all();
-            cmd->add_flag("--json", opt->json, "print one JSON object instead of the table");
+            auto* json = cmd->add_flag("--json", opt->json, "print one JSON object instead of the table");
+            cmd->add_flag("--markdown", opt->markdown,
+                          "print Markdown tables (the manual's accuracy tables are this output) instead of the table")
+                ->excludes(json);
             cmd->add_option("--body", opt->body_path,
                             "a body model: score its segments and joints against the recordings' reference "
                             "orientations (one session file or folder of <node>.hdf5)");

@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <sstream>
 
 #include "bsn/eval/tune_runner.hpp"
 #include "bsn/fusion/orientation_filter.hpp"
@@ -55,6 +57,43 @@ TEST_F(EvalCommand, TableWithEveryFilterByDefault) {
   const std::string out = read_file(log_path("eval"));
   EXPECT_NE(out.find("total"), std::string::npos);
   for (const auto& name : fusion::filter_names()) EXPECT_NE(out.find(name), std::string::npos) << name << "\n" << out;
+}
+
+// The manual's accuracy table is this output: every filter once, sorted by its mean total error, with the same
+// figures the JSON gives (the table rounds to 0.01 deg), and its worst trial over its mean.
+TEST_F(EvalCommand, MarkdownTableIsTheJsonMeansSortedWithTheWorstTrial) {
+  write_trial("walk_a", 5);
+  write_trial("walk_b", 6);
+  const std::string trials = (dir() / "trials").string();
+  ASSERT_EQ(exit_code(run("json", {"eval", trials, "--json"})), 0) << read_file(log_path("json"));
+  ASSERT_EQ(exit_code(run("markdown", {"eval", trials, "--markdown"})), 0) << read_file(log_path("markdown"));
+  const std::string json = read_file(log_path("json")), markdown = read_file(log_path("markdown"));
+  double previous_total = 0.0;
+  std::size_t rows = 0;
+  std::istringstream lines(markdown);
+  for (std::string line; std::getline(lines, line) && !line.empty();) {
+    if (line.rfind("| `", 0) != 0) continue;
+    const std::string filter = line.substr(3, line.find('`', 3) - 3);
+    double total = 0, heading = 0, inclination = 0, worst = 0, ratio = 0;
+    char worst_trial[64] = {};
+    const std::string cells = line.substr(line.find('`', 3) + 1);
+    ASSERT_EQ(std::sscanf(cells.c_str(), " | %lf° | %lf° | %lf° | %63s (%lf°) | %lf× |", &total, &heading, &inclination,
+                          worst_trial, &worst, &ratio),
+              6)
+        << line;
+    const std::string key = "{\"filter\": \"" + filter + "\", \"total_rmse_deg\": ";
+    const std::size_t at = json.find(key, json.find("\"means\""));
+    ASSERT_NE(at, std::string::npos) << filter << "\n" << json;
+    EXPECT_NEAR(total, std::stod(json.substr(at + key.size())), 0.005 + 1e-9) << filter;
+    EXPECT_GE(total, previous_total) << "sorted by mean total error: " << filter;
+    EXPECT_NEAR(ratio, worst / total, 0.01 + 0.01 / total) << line;  // both rounded to 0.01
+    EXPECT_GE(worst, total - 0.005) << "the worst trial is not below the mean: " << line;
+    previous_total = total;
+    ++rows;
+  }
+  EXPECT_EQ(rows, fusion::filter_names().size()) << markdown;
+  EXPECT_NE(markdown.find("| walk_b |"), std::string::npos) << "a row per trial\n" << markdown;
+  EXPECT_EQ(exit_code(run("both", {"eval", trials, "--markdown", "--json"})), 2);
 }
 
 TEST_F(EvalCommand, ClearErrors) {

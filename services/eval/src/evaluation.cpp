@@ -170,6 +170,50 @@ std::string to_table(const std::vector<TrialResult>& results) {
   return out;
 }
 
+std::string to_markdown(const std::vector<TrialResult>& results) {
+  std::vector<FilterMean> means = means_by_filter(results);
+  std::stable_sort(means.begin(), means.end(),
+                   [](const FilterMean& a, const FilterMean& b) { return a.mean_rmse.total < b.mean_rmse.total; });
+  std::string out =
+      "| filter | total | heading | inclination | worst trial | worst / mean |\n|---|---|---|---|---|---|\n";
+  char line[512];
+  for (const FilterMean& m : means) {
+    const TrialResult* worst = nullptr;
+    for (const auto& r : results)
+      if (r.filter == m.filter && (!worst || r.rmse.total > worst->rmse.total)) worst = &r;
+    std::snprintf(line, sizeof line, "| `%s` | %.2f° | %.2f° | %.2f° | %s (%.2f°) | %.2f× |\n", m.filter.c_str(),
+                  m.mean_rmse.total * kDeg, m.mean_rmse.heading * kDeg, m.mean_rmse.inclination * kDeg,
+                  worst->trial.c_str(), worst->rmse.total * kDeg,
+                  m.mean_rmse.total > 0 ? worst->rmse.total / m.mean_rmse.total : 0.0);
+    out += line;
+  }
+  std::vector<std::string> trials;
+  for (const auto& r : results)
+    if (std::find(trials.begin(), trials.end(), r.trial) == trials.end()) trials.push_back(r.trial);
+  out += "\nTotal RMSE per trial (degrees):\n\n| trial |";
+  std::string rule = "|---|";
+  for (const FilterMean& m : means) {
+    out += " `" + m.filter + "` |";
+    rule += "---|";
+  }
+  out += "\n" + rule + "\n";
+  for (const auto& trial : trials) {
+    out += "| " + trial + " |";
+    for (const FilterMean& m : means) {
+      const auto it = std::find_if(results.begin(), results.end(),
+                                   [&](const TrialResult& r) { return r.trial == trial && r.filter == m.filter; });
+      if (it == results.end()) {
+        out += " - |";
+      } else {
+        std::snprintf(line, sizeof line, " %.2f |", it->rmse.total * kDeg);
+        out += line;
+      }
+    }
+    out += "\n";
+  }
+  return out;
+}
+
 namespace {
 
 // A "nice" tick step (1, 2 or 5 times a power of ten) giving about `count` ticks over `span`.

@@ -166,6 +166,34 @@ std::vector<StandardTestResult> run_standard_tests(
   return results;
 }
 
+std::string standard_tests_markdown(const std::vector<StandardTestResult>& results) {
+  std::vector<std::string> filters;
+  for (const auto& r : results)
+    if (std::find(filters.begin(), filters.end(), r.filter) == filters.end()) filters.push_back(r.filter);
+  std::string out = "| filter |", rule = "|---|";
+  for (const StandardTest& t : fan_standard_tests()) {
+    out += " " + t.id + " (" + judged_name(t.judged) + ") |";
+    rule += "---|";
+  }
+  out += "\n" + rule + "\n";
+  char cell[128];
+  for (const auto& f : filters) {
+    out += "| `" + f + "` |";
+    for (const StandardTest& t : fan_standard_tests()) {
+      const auto it = std::find_if(results.begin(), results.end(),
+                                   [&](const StandardTestResult& r) { return r.filter == f && r.test == t.id; });
+      if (it == results.end()) {
+        out += " - |";
+      } else {
+        std::snprintf(cell, sizeof cell, " %.2f° %s |", it->error_deg, grade_name(it->grade));
+        out += cell;
+      }
+    }
+    out += "\n";
+  }
+  return out;
+}
+
 std::string standard_tests_table(const std::vector<StandardTestResult>& results) {
   std::vector<std::string> filters;
   for (const auto& r : results) {

@@ -48,6 +48,10 @@ std::string to_json(const std::vector<TrialResult>& results);
 /// A human table, one row per trial and filter, then the means.
 std::string to_table(const std::vector<TrialResult>& results);
 
+/// The same figures as Markdown for the manual (docs/filters.md pastes it): the filters sorted by mean total RMSE,
+/// with each filter's worst trial and its ratio to the filter's mean, then one row per trial with a column per filter.
+std::string to_markdown(const std::vector<TrialResult>& results);
+
 /// An SVG image: one panel per trial, the error series over time, one line per filter (ten colours, and dash
 /// patterns that tell the filters apart in grey print too), axes with ticks and a grid, the unscored start
 /// shaded and labelled.

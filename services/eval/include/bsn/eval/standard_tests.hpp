@@ -53,6 +53,8 @@ std::vector<StandardTestResult> run_standard_tests(
 
 /// Fan's Table 5: one row per filter, one column per test, "error grade" in each cell.
 std::string standard_tests_table(const std::vector<StandardTestResult>& results);
+/// Fan's Table 5 as Markdown for the manual: one row per filter, the error and grade of each test.
+std::string standard_tests_markdown(const std::vector<StandardTestResult>& results);
 /// {"tests": [{"test", "scenario", "judged", "what"}], "results": [{"test", "filter", "error_deg", "grade",
 ///  "mag_rejected_fraction", "caught_fraction", "total_rmse_deg", "heading_rmse_deg", "inclination_rmse_deg"}]}
 std::string standard_tests_json(const std::vector<StandardTestResult>& results);
