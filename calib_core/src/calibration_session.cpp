@@ -55,7 +55,7 @@ const char* kind_name(CalibrationKind kind) {
 
 std::optional<CalibrationKind> parse_kind(std::string_view name) {
   if (name == "magnetometer") return CalibrationKind::magnetometer;
-  if (name == "gyro-bias" || name == "gyro_bias") return CalibrationKind::gyro_bias;
+  if (name == "gyro-bias") return CalibrationKind::gyro_bias;
   if (name == "accelerometer") return CalibrationKind::accelerometer;
   if (name == "alignment") return CalibrationKind::alignment;
   return std::nullopt;

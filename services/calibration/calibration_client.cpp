@@ -66,11 +66,8 @@ std::string progress_line(const bsn::CalibrationProgress& p, bool alignment) {
 }
 
 void print_result(const bsn::CalibrationResult& r) {
-  const char* kind = r.kind() == bsn::CALIBRATION_MAGNETOMETER        ? "magnetometer"
-                     : r.kind() == bsn::CALIBRATION_GYRO_BIAS         ? "gyro bias"
-                     : r.kind() == bsn::CALIBRATION_ACCELEROMETER     ? "accelerometer"
-                     : r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT ? "alignment"
-                                                                      : "unknown kind";
+  const std::optional<calib::CalibrationKind> known = from_wire(r.kind());
+  const char* kind = known ? calib::kind_name(*known) : "unknown kind";
   if (!r.success()) {
     std::printf("%s: %s FAILED: %s\n", r.node_id().c_str(), kind, r.message().c_str());
     return;

@@ -1,10 +1,7 @@
 #include "calibration_service.hpp"
 
-#include <algorithm>
 #include <chrono>
-#include <cmath>
 #include <cstdio>
-#include <sstream>
 
 #include "bsn/config/body_config.hpp"
 #include "bsn/config/calibration_file.hpp"
@@ -14,25 +11,72 @@
 namespace bsn::services {
 namespace {
 
-constexpr std::size_t kMaxNodeIdLength = 63;  // as bsn::RawSample.node_id
-using calib::seconds_between;
-
-std::vector<std::string> split_nodes(const std::string& list) {
-  std::vector<std::string> out;
-  std::stringstream in(list);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    const auto b = item.find_first_not_of(" \t");
-    const auto e = item.find_last_not_of(" \t");
-    if (b == std::string::npos) continue;
-    item = item.substr(b, e - b + 1);
-    if (std::find(out.begin(), out.end(), item) == out.end()) out.push_back(item);
-  }
-  return out;
-}
-
 calib::SessionSample to_session_sample(const bsn::RawSample& raw) {
   return session_sample(dds::to_imu_sample(raw), raw.seq());
+}
+
+/// The request as the core takes it; an alignment's body is parsed and its nodes found here (a body model is not
+/// calib_core's).
+calib::CalibrationRequest core_request(const bsn::CalibrationRequest& r) {
+  calib::CalibrationRequest c;
+  c.id = r.request_id();
+  c.cancel = r.cancel();
+  c.kind = from_wire(r.kind());
+  c.kind_value = static_cast<int>(r.kind());
+  c.node_list = r.node_id();
+  c.session.duration_s = r.duration_s();
+  c.session.sample_count = r.sample_count();
+  c.session.until_good = r.until_good();
+  if (r.field_magnitude() != 0.0) c.session.field_magnitude = r.field_magnitude();
+  if (c.cancel || c.kind != calib::CalibrationKind::alignment) return c;
+  c.alignment.duration_s = r.duration_s();
+  if (r.pose_s() != 0.0) c.alignment.pose_s = r.pose_s();
+  c.alignment.until_good = r.until_good();
+  try {
+    const fusion::BodyModel body =
+        r.body().empty() ? fusion::default_lower_body() : config::parse_body_model(r.body(), "body");
+    const std::vector<std::string> named =
+        r.node_id() == "*" ? std::vector<std::string>{} : calib::split_node_list(r.node_id());
+    c.alignment_nodes = alignment_nodes(body, named, c.nodes_problem);
+  } catch (const config::ConfigError& e) {
+    c.body_problem = std::string("the request's body does not parse: ") + e.what();
+  }
+  return c;
+}
+
+bsn::CalibrationPhase phase_to_wire(calib::RequestPhase phase) {
+  switch (phase) {
+    case calib::RequestPhase::waiting:
+      return bsn::CALIBRATION_PHASE_WAITING;
+    case calib::RequestPhase::collecting:
+      return bsn::CALIBRATION_PHASE_COLLECTING;
+    case calib::RequestPhase::done:
+      return bsn::CALIBRATION_PHASE_DONE;
+    case calib::RequestPhase::refused:
+      return bsn::CALIBRATION_PHASE_REFUSED;
+  }
+  return bsn::CALIBRATION_PHASE_REFUSED;
+}
+
+bsn::CalibrationProgress progress_message(const calib::RequestProgress& p) {
+  bsn::CalibrationProgress m;
+  m.request_id(p.request_id);
+  m.phase(phase_to_wire(p.phase));
+  m.elapsed_s(p.elapsed_s);
+  m.seconds_left(p.seconds_left);
+  m.fraction(p.fraction);
+  m.instruction(p.instruction);
+  m.message(p.message);
+  for (const calib::NodeReport& n : p.nodes) {
+    bsn::CalibrationNodeProgress& np = m.nodes().emplace_back();
+    np.node_id(n.node);
+    np.samples(static_cast<std::uint32_t>(n.samples));
+    np.poses(static_cast<std::uint32_t>(n.poses));
+    np.octants(static_cast<std::uint32_t>(n.octants));
+    np.sphere_coverage(n.sphere_coverage);
+    np.instruction(n.instruction);
+  }
+  return m;
 }
 
 std::array<double, 3> arr(const calib::Vec3& v) { return {v.x(), v.y(), v.z()}; }
@@ -93,7 +137,8 @@ bsn::CalibrationResult alignment_message(const std::string& node, const std::str
 CalibrationService::CalibrationService(dds::Participant& participant, Options options)
     : participant_(participant),
       options_(std::move(options)),
-      store_(options_.store_dir.empty() ? default_calibration_store() : options_.store_dir) {
+      store_(options_.store_dir.empty() ? default_calibration_store() : options_.store_dir),
+      requests_(options_.requests) {
   result_writer_ = participant_.make_writer(dds::kCalibrationResultTopic);
   progress_writer_ = participant_.make_writer(dds::kCalibrationProgressTopic);
   publish_stored();
@@ -109,14 +154,13 @@ CalibrationService::~CalibrationService() {
   request_reader_.reset();
   raw_reader_.reset();
   std::lock_guard lock(mutex_);
-  std::vector<std::string> ids;
-  for (const auto& [id, run] : runs_) ids.push_back(id);
-  for (const std::string& id : ids) finish(id, dds::monotonic_ns(), "the calibration service stopped");
+  for (const calib::FinishedRequest& f : requests_.abort_all("the calibration service stopped", dds::monotonic_ns()))
+    publish_finished(f);
 }
 
 std::size_t CalibrationService::running() const {
   std::lock_guard lock(mutex_);
-  return runs_.size();
+  return requests_.running();
 }
 
 void CalibrationService::publish_stored() {
@@ -158,424 +202,138 @@ void CalibrationService::publish_stored() {
                     problems.empty() ? "" : " files skipped");
 }
 
-void CalibrationService::refuse(const std::string& request_id, const std::string& why) {
-  logging::log_warn("request '", request_id, "' refused: ", why);
-  if (const auto answered = answered_.find(request_id); answered != answered_.end()) answered->second = why;
-  publish_refusal(request_id, why);
+void CalibrationService::publish(const calib::RequestProgress& progress) {
+  progress_writer_->write(progress_message(progress));
 }
 
-void CalibrationService::publish_refusal(const std::string& request_id, const std::string& why) {
-  bsn::CalibrationProgress p;
-  p.request_id(request_id);
-  p.phase(bsn::CALIBRATION_PHASE_REFUSED);
-  p.fraction(0.0);
-  p.seconds_left(0.0);
-  p.message(why);
-  progress_writer_->write(p);
+void CalibrationService::write_result(const bsn::CalibrationResult& result, calib::CalibrationKind kind) {
+  result_writer_->write(result);
+  const std::pair<std::string, int> key{result.node_id(), static_cast<int>(kind)};
+  if (result.success()) {
+    last_success_[key] = result;
+  } else if (const auto good = last_success_.find(key); good != last_success_.end()) {
+    // The latched sample of (node, kind) is the calibration in effect for late joiners, not the failure.
+    result_writer_->write(good->second);
+  }
+}
+
+void CalibrationService::not_stored(const std::string& request_id, const std::string& node, calib::CalibrationKind kind,
+                                    const std::exception& e) {
+  // The fit is good and in effect; only its persistence failed: say so on the result too.
+  logging::log_error("request '", request_id, "': node '", node, "': ", e.what());
+  bsn::CalibrationResult& m = last_success_[{node, static_cast<int>(kind)}];
+  m.message(std::string("not stored: ") + e.what());
+  result_writer_->write(m);
 }
 
 void CalibrationService::on_request(const bsn::CalibrationRequest& request) {
+  const calib::CalibrationRequest core = core_request(request);
   std::lock_guard lock(mutex_);
-  const std::uint64_t now = dds::monotonic_ns();
-  const std::string& id = request.request_id();
-  if (request.cancel()) {
-    if (runs_.count(id) == 0) {
+  const calib::RequestDecision d = requests_.request(core, dds::monotonic_ns());
+  const std::string& id = core.id;
+  using Outcome = calib::RequestDecision::Outcome;
+  switch (d.outcome) {
+    case Outcome::cancel_not_running:
       logging::log_info("cancel of request '", id, "', which is not running; ignored");
       return;
-    }
-    logging::log_info("request '", id, "' cancelled by its requester");
-    finish(id, now, "cancelled by the requester");
-    return;
-  }
-  if (id.empty()) {
-    refuse(id, "the request has no request_id");
-    return;
-  }
-  if (const auto [answered, first] = answered_.try_emplace(id); !first) {
-    // A refusal is said again: its requester sends again when no answer came, since the refusal can go out before
-    // this writer has matched the requester's progress reader (discovery runs each way on its own).
-    if (!answered->second.empty()) {
+    case Outcome::cancelled:
+      logging::log_info("request '", id, "' cancelled by its requester");
+      publish_finished(*d.finished);
+      return;
+    case Outcome::repeat_ignored:
+      logging::log_info("request '", id, "' arrived again; it is answered once, this copy is ignored");
+      return;
+    case Outcome::refusal_repeated:
       logging::log_info("request '", id, "' arrived again; its refusal is sent again");
-      publish_refusal(id, answered->second);
+      publish(*d.progress);
       return;
-    }
-    logging::log_info("request '", id, "' arrived again; it is answered once, this copy is ignored");
-    return;
-  }
-  const std::optional<calib::CalibrationKind> kind = from_wire(request.kind());
-  if (!kind) {
-    refuse(id, "unknown kind " + std::to_string(static_cast<int>(request.kind())) +
-                   " (known: 0 magnetometer, 1 gyro bias, 2 accelerometer, 3 segment alignment)");
-    return;
-  }
-  if (*kind == calib::CalibrationKind::alignment) {
-    on_alignment_request(request, now);
-    return;
-  }
-  calib::SessionParams params;
-  params.kind = *kind;
-  params.duration_s = request.duration_s();
-  params.sample_count = request.sample_count();
-  params.until_good = request.until_good();
-  if (request.field_magnitude() != 0.0) params.field_magnitude = request.field_magnitude();
-  if (const std::string why = calib::validate(params); !why.empty()) {
-    refuse(id, why);
-    return;
-  }
-  std::vector<std::string> nodes;
-  if (request.node_id() == "*") {
-    for (const auto& [node, at] : heard_)
-      if (seconds_between(at, now) <= options_.active_node_window_s) nodes.push_back(node);
-    std::sort(nodes.begin(), nodes.end());
-    if (nodes.empty()) {
-      refuse(id, "node '*': no node has published on bsn/raw within the last " +
-                     std::to_string(options_.active_node_window_s) + " s");
+    case Outcome::refused:
+      logging::log_warn("request '", id, "' refused: ", d.progress->message);
+      publish(*d.progress);
+      // An alignment's result topic says it too, per node named.
+      for (const std::string& node : d.refused_alignment_nodes)
+        write_result(alignment_message(node, id, {}, false, "refused: " + d.progress->message),
+                     calib::CalibrationKind::alignment);
       return;
-    }
-  } else {
-    nodes = split_nodes(request.node_id());
-    if (nodes.empty()) {
-      refuse(id, "the request names no node (node_id is empty)");
+    case Outcome::started:
+      logging::log_info("request '", id, "': ", d.description);
+      publish(*d.progress);
       return;
-    }
   }
-  for (const std::string& node : nodes) {
-    if (node.size() > kMaxNodeIdLength) {
-      refuse(id, "node id '" + node.substr(0, 20) + "...' is longer than 63 characters");
-      return;
-    }
-    if (const auto b = busy_.find(node); b != busy_.end()) {
-      refuse(id, "node '" + node + "' is being calibrated by request '" + b->second + "'; wait for its result");
-      return;
-    }
-  }
-  Run run;
-  run.id = id;
-  run.kind = *kind;
-  run.start_ns = now;
-  run.last_progress_ns = 0;
-  std::string list;
-  for (const std::string& node : nodes) {
-    run.nodes.push_back({node, calib::CalibrationSession(params, now), {}});
-    busy_[node] = id;
-    list += (list.empty() ? "" : ", ") + node;
-  }
-  logging::log_info("request '", id, "': ", calib::kind_name(*kind), " of ", list, " (",
-                    params.duration_s > 0 ? std::to_string(params.duration_s) + " s" : std::string("no time limit"),
-                    params.sample_count > 0 ? ", " + std::to_string(params.sample_count) + " samples" : std::string(),
-                    params.until_good ? ", until good enough" : "", ")");
-  auto& stored = runs_[id] = std::move(run);
-  publish_progress(stored, now);
 }
 
 void CalibrationService::on_raw(const bsn::RawSample& raw) {
   std::lock_guard lock(mutex_);
-  const std::uint64_t now = dds::monotonic_ns();
-  heard_[raw.node_id()] = now;
-  const auto b = busy_.find(raw.node_id());
-  if (b == busy_.end()) return;
-  const std::string request_id = b->second;  // a copy: finish() erases the entry
-  Run& run = runs_.at(request_id);
-  if (run.alignment) {
-    const auto& nodes = run.alignment->nodes();
-    for (std::size_t i = 0; i < nodes.size(); ++i)
-      if (nodes[i].node == raw.node_id()) run.alignment->add(i, to_session_sample(raw), now);
-    if (run.alignment->collection_over(now)) finish(request_id, now);
-    return;
-  }
-  bool all_over = true;
-  for (NodeRun& n : run.nodes) {
-    if (n.node == raw.node_id()) n.session.add(to_session_sample(raw), now);
-    all_over = all_over && n.session.collection_over(now);
-  }
-  // The last sample of a sample_count collection: fit at once, from this thread, for the lowest latency.
-  if (all_over) finish(request_id, now);
+  if (const auto finished = requests_.sample(raw.node_id(), to_session_sample(raw), dds::monotonic_ns()))
+    publish_finished(*finished);
 }
 
 void CalibrationService::tick() {
   std::lock_guard lock(mutex_);
-  const std::uint64_t now = dds::monotonic_ns();
-  std::vector<std::string> over;
-  for (auto& [id, run] : runs_) {
-    if (seconds_between(run.last_progress_ns, now) >= options_.progress_period_s) publish_progress(run, now);
-    const bool all_over = run.alignment ? run.alignment->collection_over(now)
-                                        : std::all_of(run.nodes.begin(), run.nodes.end(), [now](const NodeRun& n) {
-                                            return n.session.collection_over(now);
-                                          });
-    if (all_over) over.push_back(id);
-  }
-  for (const std::string& id : over) finish(id, now);
+  const calib::TickOutcome t = requests_.tick(dds::monotonic_ns());
+  for (const calib::RequestProgress& p : t.progress) publish(p);
+  for (const calib::FinishedRequest& f : t.finished) publish_finished(f);
 }
 
-void CalibrationService::publish_progress(Run& run, std::uint64_t now) {
-  if (run.alignment) {
-    publish_alignment_progress(run, now);
-    return;
-  }
-  bsn::CalibrationProgress p;
-  p.request_id(run.id);
-  bool started = false;
-  double fraction = 1.0;
-  double seconds_left = -1.0;
-  const NodeRun* behind = nullptr;  // the node furthest from done sets the instruction of all (turned as one)
-  for (NodeRun& n : run.nodes) {
-    n.last_progress = n.session.progress(now);
-    const calib::SessionProgress& s = n.last_progress;
-    started = started || s.started;
-    if (behind == nullptr || s.fraction < fraction) behind = &n;
-    fraction = std::min(fraction, s.fraction);
-    seconds_left = std::max(seconds_left, s.seconds_left);
-    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
-    np.node_id(n.node);
-    np.samples(static_cast<std::uint32_t>(s.samples));
-    np.poses(static_cast<std::uint32_t>(s.poses));
-    np.octants(static_cast<std::uint32_t>(s.octants));
-    np.sphere_coverage(s.sphere_coverage);
-    np.instruction(s.instruction);
-  }
-  p.phase(started ? bsn::CALIBRATION_PHASE_COLLECTING : bsn::CALIBRATION_PHASE_WAITING);
-  p.elapsed_s(seconds_between(run.start_ns, now));
-  p.seconds_left(seconds_left);
-  p.fraction(fraction);
-  if (behind != nullptr) p.instruction(behind->last_progress.instruction);
-  progress_writer_->write(p);
-  run.last_progress_ns = now;
+void CalibrationService::publish_finished(const calib::FinishedRequest& finished) {
+  if (finished.kind == calib::CalibrationKind::alignment)
+    publish_alignments(finished);
+  else
+    publish_calibrations(finished);
 }
 
-void CalibrationService::publish_done(const Run& run, std::size_t succeeded) {
-  bsn::CalibrationProgress p;
-  p.request_id(run.id);
-  p.phase(bsn::CALIBRATION_PHASE_DONE);
-  p.elapsed_s(seconds_between(run.start_ns, dds::monotonic_ns()));
-  p.seconds_left(0.0);
-  p.fraction(1.0);
-  p.instruction("done: " + std::to_string(succeeded) + " of " + std::to_string(run.nodes.size()) + " nodes calibrated");
-  for (const NodeRun& n : run.nodes) {
-    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
-    np.node_id(n.node);
-    np.samples(static_cast<std::uint32_t>(n.session.samples()));
-    np.poses(static_cast<std::uint32_t>(n.last_progress.poses));
-    np.octants(static_cast<std::uint32_t>(n.last_progress.octants));
-    np.sphere_coverage(n.last_progress.sphere_coverage);
-    np.instruction(n.last_progress.instruction);
+void CalibrationService::publish_calibrations(const calib::FinishedRequest& f) {
+  std::vector<const calib::NodeCalibration*> to_store;
+  for (const calib::NodeCalibration& n : f.calibrations) {
+    if (!n.result.success) logging::log_warn("request '", f.id, "': ", n.result.message);
+    bsn::CalibrationResult m = result_message(n.node, f.id, n.result);
+    m.message(n.result.message);
+    write_result(m, f.kind);
+    if (n.result.success) to_store.push_back(&n);
   }
-  progress_writer_->write(p);
-}
-
-void CalibrationService::finish(const std::string& request_id, std::uint64_t now, const std::string& abort_reason) {
-  const auto it = runs_.find(request_id);
-  if (it == runs_.end()) return;
-  Run run = std::move(it->second);
-  runs_.erase(it);
-  if (run.alignment) {
-    finish_alignment(run, now, abort_reason);
-    return;
-  }
-  std::vector<std::pair<const NodeRun*, calib::SessionResult>> to_store;
-  for (const NodeRun& n : run.nodes) {
-    busy_.erase(n.node);
-    calib::SessionResult r;
-    if (abort_reason.empty()) {
-      r = n.session.finish();
-    } else {
-      r.kind = run.kind;
-      r.samples = n.session.samples();
-      r.message = abort_reason;
-    }
-    if (!r.success) {
-      const double waited = seconds_between(run.start_ns, now);
-      if (r.message == "no sample arrived")
-        r.message = "no sample arrived within " + std::to_string(waited).substr(0, 4) + " s";
-      r.message = "node '" + n.node + "': " + r.message;
-      logging::log_warn("request '", run.id, "': ", r.message);
-    }
-    bsn::CalibrationResult m = result_message(n.node, run.id, r);
-    m.message(r.message);
-    result_writer_->write(m);
-    const std::pair<std::string, int> key{n.node, static_cast<int>(run.kind)};
-    if (r.success) {
-      last_success_[key] = m;
-      to_store.emplace_back(&n, std::move(r));
-    } else if (const auto good = last_success_.find(key); good != last_success_.end()) {
-      // The latched sample of (node, kind) is the calibration in effect for late joiners, not the failure.
-      result_writer_->write(good->second);
-    }
-  }
-  publish_done(run, to_store.size());
+  publish(f.done);
   // Stored after every node's result is out: the store's fsync would delay each result by milliseconds.
-  for (auto& [n, r] : to_store) {
+  for (const calib::NodeCalibration* n : to_store) {
     try {
-      const std::string path = store_.save(n->node, r, run.id);
-      logging::log_info("request '", run.id, "': node '", n->node, "' calibrated (", r.samples, " samples, ",
-                        r.field.quality.pose_count, " poses); stored in ", path);
+      const std::string path = store_.save(n->node, n->result, f.id);
+      logging::log_info("request '", f.id, "': node '", n->node, "' calibrated (", n->result.samples, " samples, ",
+                        n->result.field.quality.pose_count, " poses); stored in ", path);
     } catch (const std::exception& e) {
-      // The fit is good and in effect; only its persistence failed: say so on the result too.
-      logging::log_error("request '", run.id, "': node '", n->node, "': ", e.what());
-      bsn::CalibrationResult& m = last_success_[{n->node, static_cast<int>(run.kind)}];
-      m.message(std::string("not stored: ") + e.what());
-      result_writer_->write(m);
+      not_stored(f.id, n->node, f.kind, e);
     }
   }
 }
 
-void CalibrationService::refuse_alignment(const std::string& request_id, const std::vector<std::string>& nodes,
-                                          const std::string& why) {
-  refuse(request_id, why);
-  // The result topic says it too, per node named (at most a body's worth: the refusal is on progress anyway).
-  std::size_t written = 0;
-  for (const std::string& node : nodes) {
-    if (node.empty() || node.size() > kMaxNodeIdLength || ++written > 64) continue;
-    result_writer_->write(alignment_message(node, request_id, {}, false, "refused: " + why));
-    if (const auto good = last_success_.find({node, static_cast<int>(calib::CalibrationKind::alignment)});
-        good != last_success_.end())
-      result_writer_->write(good->second);
-  }
-}
-
-void CalibrationService::on_alignment_request(const bsn::CalibrationRequest& request, std::uint64_t now) {
-  const std::string& id = request.request_id();
-  const std::vector<std::string> named = request.node_id() == "*" || request.node_id().empty()
-                                             ? std::vector<std::string>{}
-                                             : split_nodes(request.node_id());
-  fusion::BodyModel body;
-  try {
-    body = request.body().empty() ? fusion::default_lower_body() : config::parse_body_model(request.body(), "body");
-  } catch (const config::ConfigError& e) {
-    refuse_alignment(id, named, std::string("the request's body does not parse: ") + e.what());
-    return;
-  }
-  for (const std::string& node : named) {
-    if (node.size() > kMaxNodeIdLength) {
-      refuse_alignment(id, {}, "node id '" + node.substr(0, 20) + "...' is longer than 63 characters");
-      return;
-    }
-  }
-  std::string problem;
-  std::vector<calib::AlignmentNode> nodes = alignment_nodes(body, named, problem);
-  if (!problem.empty()) {
-    refuse_alignment(id, named, problem);
-    return;
-  }
-  calib::AlignmentSessionParams params;
-  params.duration_s = request.duration_s();
-  if (request.pose_s() != 0.0) params.pose_s = request.pose_s();
-  params.until_good = request.until_good();
-  std::vector<std::string> ids;
-  for (const auto& n : nodes) ids.push_back(n.node);
-  if (const std::string why = calib::validate(params); !why.empty()) {
-    refuse_alignment(id, ids, why);
-    return;
-  }
-  for (const std::string& node : ids) {
-    if (const auto b = busy_.find(node); b != busy_.end()) {
-      refuse_alignment(id, ids,
-                       "node '" + node + "' is being calibrated by request '" + b->second + "'; wait for its result");
-      return;
-    }
-  }
-  Run run;
-  run.id = id;
-  run.kind = calib::CalibrationKind::alignment;
-  run.start_ns = now;
-  run.alignment = std::make_unique<calib::AlignmentSession>(std::move(nodes), params, now);
-  std::string list;
-  for (const std::string& node : ids) {
-    busy_[node] = id;
-    list += (list.empty() ? "" : ", ") + node;
-  }
-  logging::log_info("request '", id, "': alignment of ", list, " (", params.duration_s, " s, N-pose ", params.pose_s,
-                    " s", params.until_good ? ", until good enough" : "", ")");
-  auto& stored = runs_[id] = std::move(run);
-  publish_progress(stored, now);
-}
-
-void CalibrationService::publish_alignment_progress(Run& run, std::uint64_t now) {
-  const calib::AlignmentProgress a = run.alignment->progress(now);
-  bsn::CalibrationProgress p;
-  p.request_id(run.id);
-  p.phase(a.phase == calib::AlignmentPhase::waiting ? bsn::CALIBRATION_PHASE_WAITING
-                                                    : bsn::CALIBRATION_PHASE_COLLECTING);
-  p.elapsed_s(a.elapsed_s);
-  p.seconds_left(a.seconds_left);
-  p.fraction(a.fraction);
-  p.instruction(a.instruction);
-  const auto& nodes = run.alignment->nodes();
-  for (std::size_t i = 0; i < nodes.size(); ++i) {
-    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
-    np.node_id(nodes[i].node);
-    np.samples(static_cast<std::uint32_t>(a.samples[i]));
-    np.instruction(a.node_instructions[i]);
-  }
-  progress_writer_->write(p);
-  run.last_progress_ns = now;
-}
-
-void CalibrationService::finish_alignment(Run& run, std::uint64_t now, const std::string& abort_reason) {
-  const auto& nodes = run.alignment->nodes();
-  for (const auto& n : nodes) busy_.erase(n.node);
-  calib::AlignmentSessionResult r;
-  if (abort_reason.empty()) {
-    r = run.alignment->finish(now);
-  } else {
-    r.nodes.resize(nodes.size());
-    for (auto& n : r.nodes) n.message = abort_reason;
-  }
-  if (abort_reason.empty()) {
+void CalibrationService::publish_alignments(const calib::FinishedRequest& f) {
+  if (!f.aborted) {
     // What the fit had: a failed alignment is explained by these (a pose found late, flexions cut short).
     std::string samples;
-    for (std::size_t i = 0; i < nodes.size(); ++i)
-      samples += (i == 0 ? "" : ", ") + nodes[i].node + " " + std::to_string(run.alignment->samples(i));
+    for (const calib::NodeAlignmentResult& n : f.alignments)
+      samples += (samples.empty() ? "" : ", ") + n.node + " " + std::to_string(n.alignment.samples);
+    const calib::AlignmentSessionResult& r = f.alignment_fit;
     char times[96];
     std::snprintf(times, sizeof times, "N-pose %.2f..%.2f s, flexions to %.2f s", r.pose_start_s, r.pose_end_s,
                   r.moves_end_s);
-    logging::log_info("request '", run.id, "': samples ", samples, "; ", r.paired_samples,
-                      " instants with every node; ", times, " after the first of them");
+    logging::log_info("request '", f.id, "': samples ", samples, "; ", r.paired_samples, " instants with every node; ",
+                      times, " after the first of them");
   }
   std::vector<std::pair<std::string, config::AlignmentRecord>> to_store;
-  for (std::size_t i = 0; i < nodes.size(); ++i) {
-    const calib::NodeAlignment& a = r.nodes[i];
-    config::AlignmentRecord record{nodes[i].segment,    a.sensor_to_segment,  a.source,
-                                   a.relative_residual, a.axis_observability, run.alignment->samples(i)};
-    // A failure of the whole body (a silent node, no pose, another clock) says so; a segment's own names the node.
-    const std::string message = a.success ? ""
-                                : !r.problem.empty() && a.message == r.problem
-                                    ? "the body's alignment failed: " + a.message
-                                    : "node '" + nodes[i].node + "': " + a.message;
-    if (!a.success) logging::log_warn("request '", run.id, "': ", message);
-    const bsn::CalibrationResult m = alignment_message(nodes[i].node, run.id, record, a.success, message);
-    result_writer_->write(m);
-    const std::pair<std::string, int> key{nodes[i].node, static_cast<int>(calib::CalibrationKind::alignment)};
-    if (a.success) {
-      last_success_[key] = m;
-      to_store.emplace_back(nodes[i].node, record);
-    } else if (const auto good = last_success_.find(key); good != last_success_.end()) {
-      result_writer_->write(good->second);
-    }
+  for (const calib::NodeAlignmentResult& n : f.alignments) {
+    const calib::NodeAlignment& a = n.alignment;
+    const config::AlignmentRecord record{n.segment,           a.sensor_to_segment,  a.source,
+                                         a.relative_residual, a.axis_observability, a.samples};
+    if (!a.success) logging::log_warn("request '", f.id, "': ", n.message);
+    write_result(alignment_message(n.node, f.id, record, a.success, n.message), calib::CalibrationKind::alignment);
+    if (a.success) to_store.emplace_back(n.node, record);
   }
-  bsn::CalibrationProgress p;
-  p.request_id(run.id);
-  p.phase(bsn::CALIBRATION_PHASE_DONE);
-  p.elapsed_s(seconds_between(run.start_ns, now));
-  p.fraction(1.0);
-  p.instruction("done: " + std::to_string(to_store.size()) + " of " + std::to_string(nodes.size()) + " nodes aligned" +
-                (r.problem.empty() ? "" : " (" + r.problem + ")"));
-  for (std::size_t i = 0; i < nodes.size(); ++i) {
-    bsn::CalibrationNodeProgress& np = p.nodes().emplace_back();
-    np.node_id(nodes[i].node);
-    np.samples(static_cast<std::uint32_t>(run.alignment->samples(i)));
-    np.instruction(r.nodes[i].success ? r.nodes[i].source : r.nodes[i].message);
-  }
-  progress_writer_->write(p);
+  publish(f.done);
   for (const auto& [node, record] : to_store) {
     try {
-      const std::string path = store_.save_alignment(node, record, run.id);
-      logging::log_info("request '", run.id, "': node '", node, "' aligned to segment '", record.segment, "' (",
+      const std::string path = store_.save_alignment(node, record, f.id);
+      logging::log_info("request '", f.id, "': node '", node, "' aligned to segment '", record.segment, "' (",
                         record.source, "); stored in ", path);
     } catch (const std::exception& e) {
-      logging::log_error("request '", run.id, "': node '", node, "': ", e.what());
-      bsn::CalibrationResult& m = last_success_[{node, static_cast<int>(calib::CalibrationKind::alignment)}];
-      m.message(std::string("not stored: ") + e.what());
-      result_writer_->write(m);
+      not_stored(f.id, node, calib::CalibrationKind::alignment, e);
     }
   }
 }
@@ -614,7 +372,8 @@ Command calibration_command() {
             cmd->add_option("--store", opt->service.store_dir,
                             "calibration store directory (default: $XDG_STATE_HOME/bsn/calibration or "
                             "~/.local/state/bsn/calibration)");
-            cmd->add_option("--progress-period", opt->service.progress_period_s, "seconds between progress samples")
+            cmd->add_option("--progress-period", opt->service.requests.progress_period_s,
+                            "seconds between progress samples")
                 ->check(CLI::Range(0.02, 0.5))
                 ->capture_default_str();
             add_domain_option(cmd, opt->domain);

@@ -1,23 +1,18 @@
-// The calibration service (`bsn calibration`): requests on bsn/calibration/request, the requested nodes' samples
-// from bsn/raw into one calib::CalibrationSession per node, progress on bsn/calibration/progress, results on
-// bsn/calibration/result (RELIABLE + TRANSIENT_LOCAL, keyed by node and kind), successes into the store.
+// The calibration service (`bsn calibration`): requests on bsn/calibration/request and the requested nodes' samples
+// from bsn/raw into calib::CalibrationRequests (which decides), its progress on bsn/calibration/progress, its results
+// on bsn/calibration/result (RELIABLE + TRANSIENT_LOCAL, keyed by node and kind), successes into the store.
 #pragma once
 
 #include <cstdint>
+#include <exception>
 #include <map>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <string>
-#include <unordered_map>
-#include <vector>
 
 #include "alignment_nodes.hpp"
-#include "bsn/calib/alignment_session.hpp"
-#include "bsn/calib/calibration_session.hpp"
+#include "bsn/calib/calibration_requests.hpp"
 #include "bsn/dds/participant.hpp"
-#include "bsn/fusion/body_model.hpp"
-#include "bsn/fusion/imu_sample.hpp"
 #include "calibration_store.hpp"
 #include "calibration_wire.hpp"
 #include "command.hpp"
@@ -27,10 +22,8 @@ namespace bsn::services {
 class CalibrationService {
  public:
   struct Options {
-    std::string store_dir;            ///< "" = default_calibration_store()
-    double progress_period_s = 0.25;  ///< progress of each running request this often (>= 2 Hz for a person), s
-    /// A request for node "*" takes every node heard on bsn/raw within this long, s.
-    double active_node_window_s = 1.0;
+    std::string store_dir;  ///< "" = default_calibration_store()
+    calib::CalibrationRequests::Params requests;
   };
 
   /// Loads the store and republishes what it holds. Throws std::runtime_error if the store cannot be created.
@@ -45,45 +38,25 @@ class CalibrationService {
   std::size_t running() const;
 
  private:
-  struct NodeRun {
-    std::string node;
-    calib::CalibrationSession session;
-    calib::SessionProgress last_progress;
-  };
-  struct Run {
-    std::string id;
-    calib::CalibrationKind kind;
-    std::uint64_t start_ns = 0;
-    std::uint64_t last_progress_ns = 0;
-    std::vector<NodeRun> nodes;  ///< the sensor kinds: one session per node
-    /// The alignment: one session for the body's nodes together (`nodes` stays empty).
-    std::unique_ptr<calib::AlignmentSession> alignment;
-  };
-
   void on_request(const bsn::CalibrationRequest& request);
-  void on_alignment_request(const bsn::CalibrationRequest& request, std::uint64_t now_ns);
-  /// Refuses an alignment request on the progress topic and fails each of `nodes` on the result topic.
-  void refuse_alignment(const std::string& request_id, const std::vector<std::string>& nodes, const std::string& why);
-  void finish_alignment(Run& run, std::uint64_t now_ns, const std::string& abort_reason);
-  void publish_alignment_progress(Run& run, std::uint64_t now_ns);
   void on_raw(const bsn::RawSample& raw);
-  void refuse(const std::string& request_id, const std::string& why);
-  void publish_refusal(const std::string& request_id, const std::string& why);
-  /// Ends `run` now: fits each node (or fails it with `abort_reason`), stores, publishes; erases it.
-  void finish(const std::string& request_id, std::uint64_t now_ns, const std::string& abort_reason = "");
-  void publish_progress(Run& run, std::uint64_t now_ns);
-  void publish_done(const Run& run, std::size_t succeeded);
+  void publish(const calib::RequestProgress& progress);
+  /// Writes a request's results, then its end on the progress topic, then stores the successes.
+  void publish_finished(const calib::FinishedRequest& finished);
+  void publish_calibrations(const calib::FinishedRequest& finished);
+  void publish_alignments(const calib::FinishedRequest& finished);
+  /// Writes a node's result; after a failure the node's last success of that kind again (the one in effect).
+  void write_result(const bsn::CalibrationResult& result, calib::CalibrationKind kind);
+  /// A good fit the store could not save: logged, and said on its result.
+  void not_stored(const std::string& request_id, const std::string& node, calib::CalibrationKind kind,
+                  const std::exception& e);
   void publish_stored();
 
   dds::Participant& participant_;
   Options options_;
   CalibrationStore store_;
   mutable std::mutex mutex_;
-  std::map<std::string, Run> runs_;                    ///< by request id
-  std::unordered_map<std::string, std::string> busy_;  ///< node -> the request collecting it
-  /// Every request id ever accepted ("") or refused (why: said again on a repeat).
-  std::map<std::string, std::string> answered_;
-  std::unordered_map<std::string, std::uint64_t> heard_;                        ///< node -> last arrival on bsn/raw
+  calib::CalibrationRequests requests_;
   std::map<std::pair<std::string, int>, bsn::CalibrationResult> last_success_;  ///< (node, kind) -> stored result
   std::unique_ptr<dds::Writer<bsn::CalibrationResult>> result_writer_;
   std::unique_ptr<dds::Writer<bsn::CalibrationProgress>> progress_writer_;

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "bsn/dds/conversions.hpp"
+#include "calibration_wire.hpp"
 
 namespace bsn::services {
 
@@ -37,11 +38,8 @@ FusionPipeline::CalibrationApplied FusionPipeline::apply(const bsn::CalibrationR
   if (!segment) return out;  // a node of another body
   out.segment = *segment;
   const bool alignment = r.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT;
-  out.channel = alignment                                    ? "alignment"
-                : r.kind() == bsn::CALIBRATION_MAGNETOMETER  ? "magnetometer"
-                : r.kind() == bsn::CALIBRATION_GYRO_BIAS     ? "gyroscope"
-                : r.kind() == bsn::CALIBRATION_ACCELEROMETER ? "accelerometer"
-                                                             : nullptr;
+  const std::optional<calib::CalibrationKind> kind = from_wire(r.kind());
+  out.kind = kind ? calib::kind_name(*kind) : nullptr;
   std::optional<fusion::Quat> rotation;
   calib::SensorCalibration update;
   if (alignment) {
@@ -64,7 +62,7 @@ FusionPipeline::CalibrationApplied FusionPipeline::apply(const bsn::CalibrationR
     c.bias = calib::Vec3(b[0], b[1], b[2]);
     c.transform << h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8];
     if (r.kind() == bsn::CALIBRATION_GYRO_BIAS) c.transform.setIdentity();
-    if (out.channel == nullptr || !c.bias.allFinite() || !c.transform.allFinite() ||
+    if (out.kind == nullptr || !c.bias.allFinite() || !c.transform.allFinite() ||
         !(std::abs(c.transform.determinant()) > 1e-12 * std::pow(c.transform.norm(), 3))) {
       out.outcome = CalibrationOutcome::kRefused;
       return out;

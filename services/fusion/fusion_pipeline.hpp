@@ -39,8 +39,8 @@ class FusionPipeline {
   };
   struct CalibrationApplied {
     CalibrationOutcome outcome = CalibrationOutcome::kOtherBody;
-    std::size_t segment = 0;        ///< unless kFailedResult or kOtherBody
-    const char* channel = nullptr;  ///< "magnetometer", "gyroscope", "accelerometer", "alignment"; null if unknown
+    std::size_t segment = 0;     ///< unless kFailedResult or kOtherBody
+    const char* kind = nullptr;  ///< calib::kind_name of the result's kind ("gyro-bias", ...); null if unknown
   };
   /// A calibration result as the calibration service publishes it (bsn/calibration/result): the channel's
   /// calibration replaces the segment's (its filter restarts), an alignment the sensor-to-segment rotation.

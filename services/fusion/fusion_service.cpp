@@ -114,7 +114,7 @@ void FusionService::on_calibration(const bsn::CalibrationResult& r) {
                       logging::printable(r.alignment_source()),
                       ") applied from its next sample on: bsn/orientation reports the segment frame");
   } else {
-    logging::log_info("node '", spec.node, "' (", spec.name, "): ", a.channel, " calibration '", r.request_id(),
+    logging::log_info("node '", spec.node, "' (", spec.name, "): ", a.kind, " calibration '", r.request_id(),
                       "' applied from its next sample on; its filter restarts");
   }
   status_due_ = true;

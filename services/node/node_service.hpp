@@ -1,9 +1,6 @@
 // `bsn node --source URI --node ID`: a real sensor on bsn/raw, published like `bsn sim` (sensor timestamp,
-// sequence number, channel bits). Sources:
-//   serial:PATH[?baud=N]   the bsn line protocol from a microcontroller; reconnects when the device comes back
-//   udp:PORT               the same lines in UDP datagrams, or x-io NGIMU OSC /sensors messages
-//   iio:DEVICE[?sysfs=DIR&dev=FILE]   the Linux IIO buffered interface (scan elements and scales from sysfs)
-// The parsing is io/sensor_input.hpp (pure functions); this is the I/O around it, the axis map and DDS.
+// sequence number, channel bits). The sources (serial, UDP lines or NGIMU OSC, Linux IIO) are the registry of
+// sensor_source.hpp; this is the axis map, the time base, the rejection counts and DDS around them.
 #pragma once
 
 #include <string>

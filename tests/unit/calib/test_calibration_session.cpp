@@ -243,6 +243,7 @@ TEST(CalibrationSession, ParametersThatCannotEndAreRefused) {
   EXPECT_THROW(CalibrationSession(p, 0), std::invalid_argument);
   EXPECT_EQ(parse_kind("gyro-bias"), CalibrationKind::gyro_bias);
   EXPECT_EQ(parse_kind("compass"), std::nullopt);
+  EXPECT_EQ(parse_kind("gyro_bias"), std::nullopt);  // one spelling per kind: kind_name's
 }
 
 }  // namespace

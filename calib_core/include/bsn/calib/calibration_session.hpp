@@ -22,10 +22,11 @@ enum class CalibrationKind {
   alignment,      ///< sensor-to-segment rotation of a body's nodes together: AlignmentSession, not this one
 };
 
-/// "magnetometer", "gyro-bias", "accelerometer", "alignment": the names of the client's --kind and of the store's
-/// files.
+/// "magnetometer", "gyro-bias", "accelerometer", "alignment": the one spelling of each kind, in the client's --kind,
+/// the store's file names, the logs and the messages. (A calibration file's channels are named by their sensor, so a
+/// gyro-bias result is its `gyroscope:` channel.)
 const char* kind_name(CalibrationKind kind);
-/// The kind of a name (kind_name's; "gyro_bias", the enumerator's spelling, is taken too), nullopt if unknown.
+/// The kind of a name (kind_name's), nullopt if unknown.
 std::optional<CalibrationKind> parse_kind(std::string_view name);
 
 /// What decides when a collection ends and when its data are good enough.

@@ -1,7 +1,7 @@
 // Every bsn topic, declared once (docs/design.md section 3): its name, its IDL type (through the type support that
 // fastddsgen generates for it) and how it is delivered. Writers and readers take all three from here, so they
-// always match; `bsn echo` (and recorders and bridges) iterate kAllTopics. Adding a topic is one constant and its
-// entry in kAllTopics.
+// always match; `bsn echo`, `bsn record`, `bsn export` and `bsn session` iterate kAllTopics. What else a new topic
+// touches (security roles, a new type's formatting and fields) is listed in docs/development.md, "Adding a topic".
 #pragma once
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
