@@ -33,27 +33,13 @@ bool sleep_until(std::uint64_t t_ns) {
 int write_scenario_files(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   ScenarioRunner runner(spec, {}, opt.ideal);
   const auto n = static_cast<Eigen::Index>(runner.sample_count());
-  std::vector<io::Recording> recs(runner.segment_names().size());
-  for (io::Recording& r : recs) {
-    r.sampling_rate_hz = spec.rate_hz;
-    r.gyr.resize(n, 3);
-    r.acc.resize(n, 3);
-    r.mag.resize(n, 3);
-    r.opt_quat.resize(n, 4);
-    r.movement.resize(static_cast<std::size_t>(n));
-  }
+  std::vector<io::Recording> recs(runner.segment_names().size(), io::sized_recording(spec.rate_hz, n));
+  for (io::Recording& r : recs) r.movement.resize(static_cast<std::size_t>(n));
   std::vector<ScenarioSample> out;
   for (Eigen::Index k = 0; runner.next(out); ++k) {
     for (std::size_t j = 0; j < out.size(); ++j) {
       io::Recording& r = recs[j];
-      const fusion::ImuSample& s = out[j].sample;
-      r.gyr.row(k) = s.gyr.transpose();
-      r.acc.row(k) = s.acc.transpose();
-      if (s.has_mag) {
-        r.mag.row(k) = s.mag.transpose();
-      } else {
-        r.mag.row(k).setConstant(std::numeric_limits<double>::quiet_NaN());
-      }
+      io::set_measurement_row(r, k, out[j].sample);
       const Quat q = fusion::canonical(out[j].truth);
       r.opt_quat.row(k) << q.w(), q.x(), q.y(), q.z();
       r.movement[static_cast<std::size_t>(k)] = out[j].movement ? 1 : 0;
@@ -84,6 +70,27 @@ std::uint64_t scenario_start_ns(double start_at_unix_s, std::uint64_t started) {
 // How long a secured node waits for a reader before it makes a new participant, and the longest wait after retries.
 constexpr std::uint64_t kJoinBoundNs = 10'000'000'000ull;
 constexpr std::uint64_t kMaxJoinBoundNs = 60'000'000'000ull;
+
+// The true joint angles' message of `segment`'s joint to its parent (none without a parent): names and axes.
+bsn::JointAngles truth_joint(const Body& body, const SegmentDef& def, const std::string& segment) {
+  bsn::JointAngles joint;
+  if (def.parent < 0) return joint;
+  joint.joint(def.joint.empty() ? body.segment(static_cast<std::size_t>(def.parent)).name + "-" + segment : def.joint);
+  joint.parent(body.segment(static_cast<std::size_t>(def.parent)).name);
+  joint.child(segment);
+  joint.axes("zxy");  // the ISB joint coordinate system's sequence
+  return joint;
+}
+
+// The true joint angles of sample `s` (with s.joint_relative) at `sensor_ns`, in the segment frames.
+void fill_truth_joint(const ScenarioSample& s, std::uint64_t sensor_ns, bsn::JointAngles& joint) {
+  joint.timestamp_ns(sensor_ns);
+  joint.quat(dds::to_wxyz(*s.joint_relative));
+  const fusion::Vec3 zxy = fusion::decompose(*s.joint_relative, fusion::AxisSequence{{2, 0, 1}});
+  joint.angles({zxy.x(), zxy.y(), zxy.z()});
+  joint.flags(bsn::FLAG_SEGMENT_FRAME);
+  dds::fill_anatomical(s.joint, s.joint_anatomical, joint);
+}
 
 int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   // A one-segment scenario (a free body) needs no --segment; otherwise it defaults to the node id.
@@ -117,14 +124,7 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   truth.segment(segment);
   truth.node_id(opt.node);
   bsn::Orientation segment_truth = truth;
-  bsn::JointAngles joint;
-  if (def.parent >= 0) {
-    joint.joint(def.joint.empty() ? body.segment(static_cast<std::size_t>(def.parent)).name + "-" + segment
-                                  : def.joint);
-    joint.parent(body.segment(static_cast<std::size_t>(def.parent)).name);
-    joint.child(segment);
-    joint.axes("zxy");  // the ISB joint coordinate system's sequence
-  }
+  bsn::JointAngles joint = truth_joint(body, def, segment);
   // Fast DDS 2.9.1 sometimes never completes the DDS-Security handshake of two participants, silently: secured, a
   // raw writer that no reader matched within kJoinBound says so and starts over on a new participant (waiting twice
   // as long each time, up to a minute).
@@ -163,12 +163,7 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
     segment_truth.flags(bsn::FLAG_SEGMENT_FRAME);
     outputs.segment_truth->write(segment_truth);
     if (outputs.joint && s.joint_relative) {
-      joint.timestamp_ns(sensor_ns);
-      joint.quat(dds::to_wxyz(*s.joint_relative));
-      const fusion::Vec3 zxy = fusion::decompose(*s.joint_relative, fusion::AxisSequence{{2, 0, 1}});
-      joint.angles({zxy.x(), zxy.y(), zxy.z()});
-      joint.flags(bsn::FLAG_SEGMENT_FRAME);
-      dds::fill_anatomical(s.joint, s.joint_anatomical, joint);
+      fill_truth_joint(s, sensor_ns, joint);
       outputs.joint->write(joint);
     }
     if (secured && dds::monotonic_ns() >= next_join_check_ns) {

@@ -6,6 +6,7 @@
 #include <Eigen/SVD>
 #include <cmath>
 #include <complex>
+#include <optional>
 #include <string>
 
 namespace bsn::calib {
@@ -28,6 +29,82 @@ Eigen::Index first_non_finite(const Eigen::Ref<const Points3>& p) {
 }
 
 bool matrix_finite(const Mat3& m) { return m.allFinite(); }
+
+using Mat10 = Eigen::Matrix<double, 10, 10>;
+using Vec10 = Eigen::Matrix<double, 10, 1>;
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+using Mat4 = Eigen::Matrix4d;
+
+// Quadric a x^2 + b y^2 + c z^2 + 2f yz + 2g xz + 2h xy + 2p x + 2q y + 2r z + d = 0 with the coefficients
+// split into the quadratic part v1 = (a, b, c, f, g, h) and the linear part v2 = (p, q, r, d); design row
+// (x^2, y^2, z^2, 2yz, 2xz, 2xy, 2x, 2y, 2z, 1) and scatter S = [S11 S12; S21 S22].
+Mat10 design_scatter(const Points3& p) {
+  Mat10 scatter = Mat10::Zero();
+  for (Eigen::Index k = 0; k < p.cols(); ++k) {
+    const double x = p(0, k), y = p(1, k), z = p(2, k);
+    Vec10 row;
+    row << x * x, y * y, z * z, 2 * y * z, 2 * x * z, 2 * x * y, 2 * x, 2 * y, 2 * z, 1.0;
+    scatter.selfadjointView<Eigen::Lower>().rankUpdate(row);
+  }
+  return scatter.selfadjointView<Eigen::Lower>();
+}
+
+// Li & Griffiths 2004: minimise v^T S v subject to 4J - I^2 = 1 (I = a + b + c, J = ab + bc + ac - f^2 - g^2 -
+// h^2). 4J - I^2 > 0 forces the quadratic part to be definite, so only ellipsoids qualify; every ellipsoid whose
+// shortest axis is at least half its longest does, far beyond any magnetometer's or accelerometer's distortion.
+// For fixed v1 the best v2 is -S22^-1 S21 v1, leaving (S11 - S12 S22^-1 S21) v1 = lambda C v1 with
+// v1^T C v1 = 4J - I^2; exactly one eigenvector has v1^T C v1 > 0, and it is the solution.
+// Returns the quadric's coefficients v = (v1, v2), or nullopt with fit.message saying why there is none.
+std::optional<Vec10> li_griffiths_quadric(const Mat10& scatter, double lambda_max, EllipsoidFit& fit) {
+  const Mat6 s11 = scatter.topLeftCorner<6, 6>();
+  const Eigen::Matrix<double, 6, 4> s12 = scatter.topRightCorner<6, 4>();
+  const Mat4 s22 = scatter.bottomRightCorner<4, 4>();
+  const Eigen::LDLT<Mat4> s22_solver(s22);
+  if (s22_solver.info() != Eigen::Success || !(s22_solver.vectorD().minCoeff() > 1e-14 * lambda_max)) {
+    fit.message = "the readings do not determine an ellipsoid (linear part singular)";
+    fit.condition_number = 0.0;
+    return std::nullopt;
+  }
+  const Eigen::Matrix<double, 4, 6> linear_from_quadratic = -s22_solver.solve(s12.transpose());
+  const Mat6 reduced = s11 + s12 * linear_from_quadratic;
+  Mat6 constraint = Mat6::Zero();
+  constraint.topLeftCorner<3, 3>() << -1, 1, 1, 1, -1, 1, 1, 1, -1;
+  constraint.bottomRightCorner<3, 3>() = -4.0 * Eigen::Matrix3d::Identity();
+  // C^-1 in closed form: the top-left block [-1 1 1; 1 -1 1; 1 1 -1] has inverse [0 1 1; 1 0 1; 1 1 0] / 2.
+  Mat6 constraint_inverse = Mat6::Zero();
+  constraint_inverse.topLeftCorner<3, 3>() << 0, 0.5, 0.5, 0.5, 0, 0.5, 0.5, 0.5, 0;
+  constraint_inverse.bottomRightCorner<3, 3>() = -0.25 * Eigen::Matrix3d::Identity();
+  const Eigen::EigenSolver<Mat6> generalised(constraint_inverse * reduced);
+  if (generalised.info() != Eigen::Success) {
+    fit.message = "eigen decomposition of the ellipsoid problem did not converge";
+    return std::nullopt;
+  }
+  // Choose by the sign of the constraint rather than of lambda: with noise-free data lambda is ~0 and its sign is
+  // rounding noise, while v1^T C v1 > 0 stays clear.
+  Vec6 v1 = Vec6::Zero();
+  double best_constraint = 0.0;
+  const double largest_eigenvalue = generalised.eigenvalues().cwiseAbs().maxCoeff();
+  for (Eigen::Index i = 0; i < 6; ++i) {
+    // The eigenvalues are real in theory; a clearly complex pair is rounding on a degenerate problem, not a fit.
+    if (std::abs(generalised.eigenvalues()(i).imag()) > 1e-9 * largest_eigenvalue) continue;
+    const Vec6 real_part = generalised.eigenvectors().col(i).real();
+    const double norm_sq = real_part.squaredNorm();
+    if (!(norm_sq > 0.0)) continue;
+    const double value = real_part.dot(constraint * real_part) / norm_sq;
+    if (value > best_constraint) {
+      best_constraint = value;
+      v1 = real_part;
+    }
+  }
+  if (!(best_constraint > 0.0)) {
+    fit.message = "the fitted quadric is not an ellipsoid: the readings do not cover enough directions";
+    return std::nullopt;
+  }
+  Vec10 v;
+  v << v1, linear_from_quadratic * v1;
+  return v;
+}
 
 }  // namespace
 
@@ -62,22 +139,7 @@ EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw) {
     return fit;
   }
 
-  // Quadric a x^2 + b y^2 + c z^2 + 2f yz + 2g xz + 2h xy + 2p x + 2q y + 2r z + d = 0 with the coefficients
-  // split into the quadratic part v1 = (a, b, c, f, g, h) and the linear part v2 = (p, q, r, d); design row
-  // (x^2, y^2, z^2, 2yz, 2xz, 2xy, 2x, 2y, 2z, 1) and scatter S = [S11 S12; S21 S22].
-  using Mat10 = Eigen::Matrix<double, 10, 10>;
-  using Vec10 = Eigen::Matrix<double, 10, 1>;
-  using Mat6 = Eigen::Matrix<double, 6, 6>;
-  using Vec6 = Eigen::Matrix<double, 6, 1>;
-  using Mat4 = Eigen::Matrix4d;
-  Mat10 scatter = Mat10::Zero();
-  for (Eigen::Index k = 0; k < p.cols(); ++k) {
-    const double x = p(0, k), y = p(1, k), z = p(2, k);
-    Vec10 row;
-    row << x * x, y * y, z * z, 2 * y * z, 2 * x * z, 2 * x * y, 2 * x, 2 * y, 2 * z, 1.0;
-    scatter.selfadjointView<Eigen::Lower>().rankUpdate(row);
-  }
-  scatter = scatter.selfadjointView<Eigen::Lower>();
+  const Mat10 scatter = design_scatter(p);
   // The condition of the (unconstrained) algebraic problem, for the quality report: a near-null second direction
   // of the design scatter means the readings admit more than one quadric.
   const Eigen::SelfAdjointEigenSolver<Mat10> eig(scatter, Eigen::EigenvaluesOnly);
@@ -94,57 +156,9 @@ EllipsoidFit fit_ellipsoid(const Eigen::Ref<const Points3>& raw) {
     return fit;
   }
 
-  // Li & Griffiths 2004: minimise v^T S v subject to 4J - I^2 = 1 (I = a + b + c, J = ab + bc + ac - f^2 - g^2 -
-  // h^2). 4J - I^2 > 0 forces the quadratic part to be definite, so only ellipsoids qualify; every ellipsoid whose
-  // shortest axis is at least half its longest does, far beyond any magnetometer's or accelerometer's distortion.
-  // For fixed v1 the best v2 is -S22^-1 S21 v1, leaving (S11 - S12 S22^-1 S21) v1 = lambda C v1 with
-  // v1^T C v1 = 4J - I^2; exactly one eigenvector has v1^T C v1 > 0, and it is the solution.
-  const Mat6 s11 = scatter.topLeftCorner<6, 6>();
-  const Eigen::Matrix<double, 6, 4> s12 = scatter.topRightCorner<6, 4>();
-  const Mat4 s22 = scatter.bottomRightCorner<4, 4>();
-  const Eigen::LDLT<Mat4> s22_solver(s22);
-  if (s22_solver.info() != Eigen::Success || !(s22_solver.vectorD().minCoeff() > 1e-14 * lambda_max)) {
-    fit.message = "the readings do not determine an ellipsoid (linear part singular)";
-    fit.condition_number = 0.0;
-    return fit;
-  }
-  const Eigen::Matrix<double, 4, 6> linear_from_quadratic = -s22_solver.solve(s12.transpose());
-  const Mat6 reduced = s11 + s12 * linear_from_quadratic;
-  Mat6 constraint = Mat6::Zero();
-  constraint.topLeftCorner<3, 3>() << -1, 1, 1, 1, -1, 1, 1, 1, -1;
-  constraint.bottomRightCorner<3, 3>() = -4.0 * Eigen::Matrix3d::Identity();
-  // C^-1 in closed form: the top-left block [-1 1 1; 1 -1 1; 1 1 -1] has inverse [0 1 1; 1 0 1; 1 1 0] / 2.
-  Mat6 constraint_inverse = Mat6::Zero();
-  constraint_inverse.topLeftCorner<3, 3>() << 0, 0.5, 0.5, 0.5, 0, 0.5, 0.5, 0.5, 0;
-  constraint_inverse.bottomRightCorner<3, 3>() = -0.25 * Eigen::Matrix3d::Identity();
-  const Eigen::EigenSolver<Mat6> generalised(constraint_inverse * reduced);
-  if (generalised.info() != Eigen::Success) {
-    fit.message = "eigen decomposition of the ellipsoid problem did not converge";
-    return fit;
-  }
-  // Choose by the sign of the constraint rather than of lambda: with noise-free data lambda is ~0 and its sign is
-  // rounding noise, while v1^T C v1 > 0 stays clear.
-  Vec6 v1 = Vec6::Zero();
-  double best_constraint = 0.0;
-  const double largest_eigenvalue = generalised.eigenvalues().cwiseAbs().maxCoeff();
-  for (Eigen::Index i = 0; i < 6; ++i) {
-    // The eigenvalues are real in theory; a clearly complex pair is rounding on a degenerate problem, not a fit.
-    if (std::abs(generalised.eigenvalues()(i).imag()) > 1e-9 * largest_eigenvalue) continue;
-    const Vec6 real_part = generalised.eigenvectors().col(i).real();
-    const double norm_sq = real_part.squaredNorm();
-    if (!(norm_sq > 0.0)) continue;
-    const double value = real_part.dot(constraint * real_part) / norm_sq;
-    if (value > best_constraint) {
-      best_constraint = value;
-      v1 = real_part;
-    }
-  }
-  if (!(best_constraint > 0.0)) {
-    fit.message = "the fitted quadric is not an ellipsoid: the readings do not cover enough directions";
-    return fit;
-  }
-  Vec10 v;
-  v << v1, linear_from_quadratic * v1;
+  const std::optional<Vec10> quadric = li_griffiths_quadric(scatter, lambda_max, fit);
+  if (!quadric) return fit;
+  const Vec10& v = *quadric;
 
   Mat3 a;
   a << v(0), v(5), v(4), v(5), v(1), v(3), v(4), v(3), v(2);

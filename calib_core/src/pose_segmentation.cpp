@@ -25,30 +25,57 @@ std::vector<bool> rest_flags(const Eigen::Ref<const Points3>& rates, const Vec3&
   return rest;
 }
 
+// Why the inputs cannot be segmented, or "" when they can.
+std::string input_problem(const Eigen::Ref<const Points3>& rates, const Eigen::Ref<const Points3>& readings,
+                          double sample_rate_hz, const PoseSegmentationParams& params) {
+  if (!(sample_rate_hz > 0.0) || !std::isfinite(sample_rate_hz)) {
+    return "sample rate must be positive and finite";
+  }
+  if (rates.cols() != readings.cols()) {
+    return "gyro and readings differ in length (" + std::to_string(rates.cols()) + " vs " +
+           std::to_string(readings.cols()) + ")";
+  }
+  if (!(params.rest_rate_rad_s > 0.0) || !(params.min_pose_s > 0.0) || !(params.smoothing_s >= 0.0) ||
+      !(params.edge_trim_s >= 0.0)) {
+    return "segmentation parameters must be positive";
+  }
+  for (Eigen::Index k = 0; k < rates.cols(); ++k) {
+    if (!rates.col(k).allFinite()) {
+      return "non-finite gyro sample (NaN or Inf) at sample " + std::to_string(k);
+    }
+  }
+  return "";
+}
+
+// The gyro integrated (bias removed) from the first sample, sampled at each run's middle sample.
+std::vector<Eigen::Quaterniond> orientations_at_middles(const Eigen::Ref<const Points3>& rates, const Vec3& bias,
+                                                        double sample_rate_hz, const std::vector<std::size_t>& begins,
+                                                        const std::vector<std::size_t>& ends) {
+  const auto n = static_cast<std::size_t>(rates.cols());
+  const double dt = 1.0 / sample_rate_hz;
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+  std::vector<Eigen::Quaterniond> at_middle;
+  std::size_t next = 0;
+  for (std::size_t k = 0; k < n && next < begins.size(); ++k) {
+    if (k == (begins[next] + ends[next]) / 2) {
+      at_middle.push_back(q);
+      ++next;
+    }
+    const Vec3 w = (rates.col(static_cast<Eigen::Index>(k)) - bias) * dt;
+    const double angle = w.norm();
+    if (angle > 0.0) q = (q * Eigen::Quaterniond(Eigen::AngleAxisd(angle, w / angle))).normalized();
+  }
+  return at_middle;
+}
+
 }  // namespace
 
 PoseSegmentation segment_poses(const Eigen::Ref<const Points3>& rates, const Eigen::Ref<const Points3>& readings,
                                double sample_rate_hz, const PoseSegmentationParams& params) {
   PoseSegmentation out;
-  if (!(sample_rate_hz > 0.0) || !std::isfinite(sample_rate_hz)) {
-    out.message = "sample rate must be positive and finite";
+  if (std::string problem = input_problem(rates, readings, sample_rate_hz, params); !problem.empty()) {
+    out.message = std::move(problem);
     return out;
-  }
-  if (rates.cols() != readings.cols()) {
-    out.message = "gyro and readings differ in length (" + std::to_string(rates.cols()) + " vs " +
-                  std::to_string(readings.cols()) + ")";
-    return out;
-  }
-  if (!(params.rest_rate_rad_s > 0.0) || !(params.min_pose_s > 0.0) || !(params.smoothing_s >= 0.0) ||
-      !(params.edge_trim_s >= 0.0)) {
-    out.message = "segmentation parameters must be positive";
-    return out;
-  }
-  for (Eigen::Index k = 0; k < rates.cols(); ++k) {
-    if (!rates.col(k).allFinite()) {
-      out.message = "non-finite gyro sample (NaN or Inf) at sample " + std::to_string(k);
-      return out;
-    }
   }
   const Eigen::Index n = rates.cols();
   const auto half_window = static_cast<Eigen::Index>(params.smoothing_s * sample_rate_hz / 2.0);
@@ -99,19 +126,8 @@ PoseSegmentation segment_poses(const Eigen::Ref<const Points3>& rates, const Eig
   out.gyro_bias /= static_cast<double>(out.rest_samples);
 
   // Integrate the bias-corrected gyro and keep the orientation at each pose's middle sample.
-  const double dt = 1.0 / sample_rate_hz;
-  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
-  std::vector<Eigen::Quaterniond> at_middle;
-  std::size_t next = 0;
-  for (std::size_t k = 0; k < static_cast<std::size_t>(n) && next < begins.size(); ++k) {
-    if (k == (begins[next] + ends[next]) / 2) {
-      at_middle.push_back(q);
-      ++next;
-    }
-    const Vec3 w = (rates.col(static_cast<Eigen::Index>(k)) - out.gyro_bias) * dt;
-    const double angle = w.norm();
-    if (angle > 0.0) q = (q * Eigen::Quaterniond(Eigen::AngleAxisd(angle, w / angle))).normalized();
-  }
+  const std::vector<Eigen::Quaterniond> at_middle =
+      orientations_at_middles(rates, out.gyro_bias, sample_rate_hz, begins, ends);
 
   // Pose means of the finite readings; a pose without any is dropped.
   Points3 means(3, static_cast<Eigen::Index>(begins.size()));

@@ -53,33 +53,7 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
   }
   r.segment = index->second;
   Segment& seg = segments_[r.segment];
-  if (source.known()) {
-    if (!seg.source) {
-      seg.source = source;  // the first writer heard owns the node
-    } else if (*seg.source != source) {
-      // Stale by the flag (check_stale) or by this arrival, whichever comes first: the owner has been silent.
-      const bool owner_silent =
-          seg.stale || (seg.last_arrival_ns && arrival_ns > *seg.last_arrival_ns + stale_timeout_ns_);
-      if (!owner_silent) {
-        // Two writers of one node interleave two unrelated streams; the owner's keeps the filter. The rejected
-        // sample leaves the gate's stream and the node's freshness alone.
-        seg.gate.refuse(SampleVerdict::kConflictingSource);
-        r.outcome = SampleOutcome::kGateRejected;
-        r.verdict = SampleVerdict::kConflictingSource;
-        r.new_conflicting_source = seg.conflicting_source != source;
-        seg.conflicting_source = source;
-        return r;
-      }
-      // The owner went stale: this writer takes the node over. Its sequence numbers and clock are its own, so the
-      // gate starts a new stream and the filter restarts.
-      r.source_handover = true;
-      r.previous_source = *seg.source;
-      seg.source = source;
-      ++seg.source_handovers;
-      seg.gate.restart_stream();
-      seg.filter->reset();
-    }
-  }
+  if (!admit_source(seg, arrival_ns, source, r)) return r;
   seg.last_arrival_ns = arrival_ns;
   r.node_fresh = std::exchange(seg.stale, false);
 
@@ -108,6 +82,41 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
   seg.q_sensor = q_sensor;
   seg.rate = s.has_gyr ? Vec3(s.gyr - r.gyro_bias) : Vec3::Zero();
   seg.timestamp_ns = s.timestamp_ns;
+  estimate_joint(seg, r);
+  return r;
+}
+
+bool BodyFusion::admit_source(Segment& seg, std::uint64_t arrival_ns, const SourceId& source, SampleResult& r) {
+  if (!source.known()) return true;
+  if (!seg.source) {
+    seg.source = source;  // the first writer heard owns the node
+  } else if (*seg.source != source) {
+    // Stale by the flag (check_stale) or by this arrival, whichever comes first: the owner has been silent.
+    const bool owner_silent =
+        seg.stale || (seg.last_arrival_ns && arrival_ns > *seg.last_arrival_ns + stale_timeout_ns_);
+    if (!owner_silent) {
+      // Two writers of one node interleave two unrelated streams; the owner's keeps the filter. The rejected
+      // sample leaves the gate's stream and the node's freshness alone.
+      seg.gate.refuse(SampleVerdict::kConflictingSource);
+      r.outcome = SampleOutcome::kGateRejected;
+      r.verdict = SampleVerdict::kConflictingSource;
+      r.new_conflicting_source = seg.conflicting_source != source;
+      seg.conflicting_source = source;
+      return false;
+    }
+    // The owner went stale: this writer takes the node over. Its sequence numbers and clock are its own, so the
+    // gate starts a new stream and the filter restarts.
+    r.source_handover = true;
+    r.previous_source = *seg.source;
+    seg.source = source;
+    ++seg.source_handovers;
+    seg.gate.restart_stream();
+    seg.filter->reset();
+  }
+  return true;
+}
+
+void BodyFusion::estimate_joint(Segment& seg, SampleResult& r) {
   if (const Segment* parent = seg.parent ? &segments_[*seg.parent] : nullptr; parent && parent->q) {
     const SegmentSpec& spec = body_.segments[r.segment];
     // The parent at the child's sample time: its latest orientation turned on by its rate over the lag (one clock).
@@ -144,7 +153,6 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
                             parent->flags.initialising || seg.flags.initialising,
                             heading};
   }
-  return r;
 }
 
 std::optional<std::size_t> BodyFusion::update_calibration(std::string_view node,

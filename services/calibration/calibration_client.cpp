@@ -96,9 +96,8 @@ void print_result(const bsn::CalibrationResult& r) {
   if (!r.message().empty()) std::printf("  note: %s\n", r.message().c_str());
 }
 
-}  // namespace
-
-int run_live_calibration(const LiveCalibrationOptions& opt) {
+/// The request of `opt`, checked; 0, or 2 (said) when the options do not go together or the body is unreadable.
+int live_request(const LiveCalibrationOptions& opt, bsn::CalibrationRequest& request) {
   const std::optional<calib::CalibrationKind> kind = calib::parse_kind(opt.kind);
   if (!kind) {
     std::fprintf(stderr, "bsn calibrate: unknown --kind '%s' (magnetometer, gyro-bias, accelerometer, alignment)\n",
@@ -127,7 +126,6 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
       return 2;
     }
   }
-  bsn::CalibrationRequest request;
   request.request_id(opt.request_id.empty() ? default_request_id() : opt.request_id);
   request.node_id(opt.all_nodes || opt.node.empty() ? "*" : opt.node);
   request.kind(to_wire(*kind));
@@ -137,46 +135,29 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
   request.field_magnitude(opt.field_magnitude);
   request.body(body_text);
   request.pose_s(opt.pose_s);
+  return 0;
+}
 
-  DdsCommandFrame frame(opt.domain, "bsn calibrate --live");
+/// The service's replies to the request, written by the DDS readers.
+struct LiveReplies {
   std::mutex mutex;
   std::optional<bsn::CalibrationProgress> progress;
   bool progress_changed = false;
   std::map<std::string, bsn::CalibrationResult> results;  // of this request, by node
-  auto progress_reader = frame.participant().make_reader(dds::kCalibrationProgressTopic,
-                                                         [&](const bsn::CalibrationProgress& p, const auto&) {
-                                                           if (p.request_id() != request.request_id()) return;
-                                                           std::lock_guard lock(mutex);
-                                                           progress = p;
-                                                           progress_changed = true;
-                                                         });
-  auto result_reader =
-      frame.participant().make_reader(dds::kCalibrationResultTopic, [&](const bsn::CalibrationResult& r, const auto&) {
-        if (r.request_id() != request.request_id()) return;
-        std::lock_guard lock(mutex);
-        results[r.node_id()] = r;
-      });
-  auto request_writer = frame.participant().make_writer(dds::kCalibrationRequestTopic);
+};
 
-  // The request is VOLATILE: a service must be matched (on all three topics) before it is sent.
-  const auto start = Clock::now();
-  while (request_writer->matched() == 0 || progress_reader->matched() == 0 || result_reader->matched() == 0) {
-    if (!dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) return 1;
-    if (since(start) > opt.service_timeout_s) {
-      std::fprintf(stderr,
-                   "bsn calibrate: no calibration service answers in domain %d within %.0f s (is `bsn "
-                   "calibration` running?)\n",
-                   opt.domain, opt.service_timeout_s);
-      return 1;
-    }
-  }
-  const std::uint64_t lost_before = progress_reader->writers_lost();
-  request_writer->write(request);
+/// Shows the progress until the service is done (then prints the results), refuses, or is gone, or Ctrl-C; the
+/// exit code, or nullopt at Ctrl-C.
+std::optional<int> follow_request(LiveReplies& replies, const dds::Reader<bsn::CalibrationProgress>& progress_reader,
+                                  dds::Writer<bsn::CalibrationRequest>& request_writer,
+                                  const bsn::CalibrationRequest& request, std::uint64_t lost_before) {
+  const bool alignment = request.kind() == bsn::CALIBRATION_SEGMENT_ALIGNMENT;
   auto last_sent_at = Clock::now();
   constexpr double kResendAfterS = 0.5;
-  std::fprintf(stderr, "request %s: %s of %s\n", request.request_id().c_str(), calib::kind_name(*kind),
-               request.node_id().c_str());
-
+  std::mutex& mutex = replies.mutex;
+  std::optional<bsn::CalibrationProgress>& progress = replies.progress;
+  bool& progress_changed = replies.progress_changed;
+  std::map<std::string, bsn::CalibrationResult>& results = replies.results;
   const bool tty = isatty(fileno(stderr)) != 0;
   auto last_progress_at = Clock::now();
   auto last_line_at = Clock::now() - std::chrono::seconds(10);
@@ -227,34 +208,79 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
     // runs each way on its own); it says a refusal again to the same request id (an accepted one is ignored, and its
     // progress comes every period anyway).
     if (!progress && since(last_sent_at) >= kResendAfterS) {
-      request_writer->write(request);
+      request_writer.write(request);
       last_sent_at = Clock::now();
     }
     // Service death: its progress writer's liveliness (1 s lease) lapses, or it leaves (unmatched).
-    if (progress_reader->writers_lost() > lost_before || progress_reader->matched() == 0 ||
+    if (progress_reader.writers_lost() > lost_before || progress_reader.matched() == 0 ||
         since(last_progress_at) > 3.0) {
       end_line();
       std::fprintf(stderr, "bsn calibrate: the calibration service is gone (%s) before the result of %s\n",
-                   progress_reader->writers_lost() > lost_before ? "its DDS liveliness lapsed"
-                   : progress_reader->matched() == 0             ? "it left the domain"
-                                                                 : "no progress for 3 s",
+                   progress_reader.writers_lost() > lost_before ? "its DDS liveliness lapsed"
+                   : progress_reader.matched() == 0             ? "it left the domain"
+                                                                : "no progress for 3 s",
                    request.request_id().c_str());
       return 1;
     }
   }
+  return std::nullopt;
+}
+
+}  // namespace
+
+int run_live_calibration(const LiveCalibrationOptions& opt) {
+  bsn::CalibrationRequest request;
+  if (const int code = live_request(opt, request); code != 0) return code;
+
+  DdsCommandFrame frame(opt.domain, "bsn calibrate --live");
+  LiveReplies replies;
+  auto progress_reader = frame.participant().make_reader(dds::kCalibrationProgressTopic,
+                                                         [&](const bsn::CalibrationProgress& p, const auto&) {
+                                                           if (p.request_id() != request.request_id()) return;
+                                                           std::lock_guard lock(replies.mutex);
+                                                           replies.progress = p;
+                                                           replies.progress_changed = true;
+                                                         });
+  auto result_reader =
+      frame.participant().make_reader(dds::kCalibrationResultTopic, [&](const bsn::CalibrationResult& r, const auto&) {
+        if (r.request_id() != request.request_id()) return;
+        std::lock_guard lock(replies.mutex);
+        replies.results[r.node_id()] = r;
+      });
+  auto request_writer = frame.participant().make_writer(dds::kCalibrationRequestTopic);
+
+  // The request is VOLATILE: a service must be matched (on all three topics) before it is sent.
+  const auto start = Clock::now();
+  while (request_writer->matched() == 0 || progress_reader->matched() == 0 || result_reader->matched() == 0) {
+    if (!dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) return 1;
+    if (since(start) > opt.service_timeout_s) {
+      std::fprintf(stderr,
+                   "bsn calibrate: no calibration service answers in domain %d within %.0f s (is `bsn "
+                   "calibration` running?)\n",
+                   opt.domain, opt.service_timeout_s);
+      return 1;
+    }
+  }
+  const std::uint64_t lost_before = progress_reader->writers_lost();
+  request_writer->write(request);
+  std::fprintf(stderr, "request %s: %s of %s\n", request.request_id().c_str(), calib::kind_name(*calib::parse_kind(opt.kind)),
+               request.node_id().c_str());
+
+  if (const auto code = follow_request(replies, *progress_reader, *request_writer, request, lost_before)) return *code;
   // Ctrl-C (or SIGTERM): cancel the request on the service, and say what it answered.
-  end_line();
+  if (isatty(fileno(stderr))) std::fputc('\n', stderr);
   request.cancel(true);
   request_writer->write(request);
   std::fprintf(stderr, "bsn calibrate: cancelling request %s\n", request.request_id().c_str());
   const auto cancel_at = Clock::now();
   while (since(cancel_at) < 2.0) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    std::lock_guard lock(mutex);
-    if (!results.empty() && progress && results.size() >= progress->nodes().size()) break;
+    std::lock_guard lock(replies.mutex);
+    if (!replies.results.empty() && replies.progress && replies.results.size() >= replies.progress->nodes().size())
+      break;
   }
-  std::lock_guard lock(mutex);
-  for (const auto& [node, r] : results) print_result(r);
+  std::lock_guard lock(replies.mutex);
+  for (const auto& [node, r] : replies.results) print_result(r);
   return 1;
 }
 

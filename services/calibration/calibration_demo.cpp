@@ -54,7 +54,97 @@ struct HeadingWatch {
   std::optional<Clock::time_point> calibrated_at;
   std::optional<bsn::CalibrationProgress> progress;
   std::optional<bsn::CalibrationResult> result;
+
+  void on_truth(const bsn::Orientation& o) {
+    if (!dds::finite_values(o)) return;  // never a number to compare with
+    std::lock_guard lock(mutex);
+    truth[o.timestamp_ns()] = dds::to_quat(o.quat());
+  }
+
+  /// Scores an estimate against the truth of its instant: before the calibration (from 5 s on, once the filter
+  /// has settled) or from 1 s after it.
+  void on_estimate(const bsn::Orientation& o) {
+    if (!dds::finite_values(o)) return;
+    std::lock_guard lock(mutex);
+    const auto t = truth.find(o.timestamp_ns());
+    if (t == truth.end()) return;
+    const double e = std::abs(fusion::error_angles(dds::to_quat(o.quat()), t->second).heading) * kDeg;
+    truth.erase(truth.begin(), t);
+    const auto now = Clock::now();
+    recent.emplace_back(now, e);
+    while (!recent.empty() && now - recent.front().first > std::chrono::seconds(1)) recent.pop_front();
+    if (!calibrated_at && o.timestamp_ns() > 5'000'000'000ull) {
+      before_sum_sq += e * e;
+      ++before_n;
+    } else if (calibrated_at && now > *calibrated_at + std::chrono::seconds(1)) {
+      after_sum_sq += e * e;
+      ++after_n;
+    }
+  }
+
+  /// The live line: the largest heading error of the last second and the calibration's progress or result.
+  /// `calibrated` says whether the result has come.
+  std::string line(const std::string& request_id, bool& calibrated) {
+    std::lock_guard lock(mutex);
+    double worst = 0.0;
+    for (const auto& [at, e] : recent) worst = std::max(worst, e);
+    char text[512];
+    calibrated = calibrated_at.has_value();
+    if (!calibrated) {
+      const auto& p = progress;
+      std::snprintf(text, sizeof text, "heading error %6.1f deg (uncalibrated) | calibrating: %3.0f%%, %u poses | %s",
+                    worst, p ? 100.0 * p->fraction() : 0.0, p && !p->nodes().empty() ? p->nodes()[0].poses() : 0u,
+                    p ? p->instruction().c_str() : "waiting for the service");
+    } else {
+      std::snprintf(text, sizeof text, "heading error %6.2f deg (calibrated by request %s, %s)", worst,
+                    request_id.c_str(), result && result->success() ? "applied live" : "FAILED");
+    }
+    return text;
+  }
 };
+
+/// Shows the heading error until --duration, the simulated node's end, or 4 s after the calibration.
+void show_heading(HeadingWatch& watch, dds::ChildProcess& sim, Clock::time_point start, double duration_s,
+                  const std::string& request_id) {
+  const bool tty = isatty(STDOUT_FILENO) != 0;
+  auto next_draw = Clock::now();
+  std::optional<Clock::time_point> show_after_until;
+  while (dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
+    const auto now = Clock::now();
+    if (duration_s > 0.0 && now - start > std::chrono::duration<double>(duration_s)) break;
+    if (!sim.running() || (show_after_until && now > *show_after_until)) break;
+    if (now < next_draw) continue;
+    next_draw = now + std::chrono::milliseconds(tty ? 250 : 1000);
+    bool calibrated = false;
+    const std::string line = watch.line(request_id, calibrated);
+    if (calibrated && !show_after_until) show_after_until = now + std::chrono::seconds(4);
+    std::printf(tty ? "\r\033[K%s" : "%s\n", line.c_str());
+    std::fflush(stdout);
+  }
+  if (tty) std::printf("\n");
+}
+
+/// The heading error before and after the calibration; 0 when it fell below 2 deg RMS (the folder then removed).
+int summarise(HeadingWatch& watch, const std::filesystem::path& dir) {
+  std::lock_guard lock(watch.mutex);
+  if (!watch.result || !watch.result->success()) {
+    std::printf("no calibration result%s%s; logs in %s\n", watch.result ? ": " : "",
+                watch.result ? watch.result->message().c_str() : "", dir.c_str());
+    return 1;
+  }
+  const double before = watch.before_n ? std::sqrt(watch.before_sum_sq / static_cast<double>(watch.before_n)) : NAN;
+  const double after = watch.after_n ? std::sqrt(watch.after_sum_sq / static_cast<double>(watch.after_n)) : NAN;
+  std::printf("heading error RMS: %.1f deg before the calibration, %.2f deg from 1 s after it (%zu estimates)\n",
+              before, after, watch.after_n);
+  const int exit_code = after < 2.0 ? 0 : 1;
+  if (exit_code == 0) {
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  } else {
+    std::printf("logs kept in %s\n", dir.c_str());
+  }
+  return exit_code;
+}
 
 }  // namespace
 
@@ -73,34 +163,12 @@ int run_calibration_demo(double speed, double duration_s, int domain) {
   const std::string request_id = "demo-" + std::to_string(getpid());
 
   HeadingWatch watch;
-  int exit_code = 0;
   {
     dds::Participant participant({domain, "bsn demo --calibrate"});
-    auto truth_reader =
-        participant.make_reader(dds::kTruthOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
-          if (!dds::finite_values(o)) return;  // never a number to compare with
-          std::lock_guard lock(watch.mutex);
-          watch.truth[o.timestamp_ns()] = dds::to_quat(o.quat());
-        });
-    auto estimate_reader = participant.make_reader(dds::kOrientationTopic, [&](const bsn::Orientation& o, const auto&) {
-      if (!dds::finite_values(o)) return;
-      std::lock_guard lock(watch.mutex);
-      const auto t = watch.truth.find(o.timestamp_ns());
-      if (t == watch.truth.end()) return;
-      const double e = std::abs(fusion::error_angles(dds::to_quat(o.quat()), t->second).heading) * kDeg;
-      watch.truth.erase(watch.truth.begin(), t);
-      const auto now = Clock::now();
-      watch.recent.emplace_back(now, e);
-      while (!watch.recent.empty() && now - watch.recent.front().first > std::chrono::seconds(1))
-        watch.recent.pop_front();
-      if (!watch.calibrated_at && o.timestamp_ns() > 5'000'000'000ull) {
-        watch.before_sum_sq += e * e;
-        ++watch.before_n;
-      } else if (watch.calibrated_at && now > *watch.calibrated_at + std::chrono::seconds(1)) {
-        watch.after_sum_sq += e * e;
-        ++watch.after_n;
-      }
-    });
+    auto truth_reader = participant.make_reader(dds::kTruthOrientationTopic,
+                                                [&](const bsn::Orientation& o, const auto&) { watch.on_truth(o); });
+    auto estimate_reader = participant.make_reader(
+        dds::kOrientationTopic, [&](const bsn::Orientation& o, const auto&) { watch.on_estimate(o); });
     auto progress_reader =
         participant.make_reader(dds::kCalibrationProgressTopic, [&](const bsn::CalibrationProgress& p, const auto&) {
           if (p.request_id() != request_id) return;
@@ -154,53 +222,10 @@ int run_calibration_demo(double speed, double duration_s, int domain) {
                                  "imu", "--speed", std::to_string(speed)},
         (dir / "sim.log").string()));
 
-    const bool tty = isatty(STDOUT_FILENO) != 0;
-    auto next_draw = Clock::now();
-    std::optional<Clock::time_point> show_after_until;
-    while (dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
-      const auto now = Clock::now();
-      if (duration_s > 0.0 && now - start > std::chrono::duration<double>(duration_s)) break;
-      if (!children[2]->running() || (show_after_until && now > *show_after_until)) break;
-      if (now < next_draw) continue;
-      next_draw = now + std::chrono::milliseconds(tty ? 250 : 1000);
-      std::lock_guard lock(watch.mutex);
-      double recent = 0.0;
-      for (const auto& [at, e] : watch.recent) recent = std::max(recent, e);
-      char line[512];
-      if (!watch.calibrated_at) {
-        const auto& p = watch.progress;
-        std::snprintf(line, sizeof line, "heading error %6.1f deg (uncalibrated) | calibrating: %3.0f%%, %u poses | %s",
-                      recent, p ? 100.0 * p->fraction() : 0.0, p && !p->nodes().empty() ? p->nodes()[0].poses() : 0u,
-                      p ? p->instruction().c_str() : "waiting for the service");
-      } else {
-        if (!show_after_until) show_after_until = now + std::chrono::seconds(4);
-        std::snprintf(line, sizeof line, "heading error %6.2f deg (calibrated by request %s, %s)", recent,
-                      request_id.c_str(), watch.result && watch.result->success() ? "applied live" : "FAILED");
-      }
-      std::printf(tty ? "\r\033[K%s" : "%s\n", line);
-      std::fflush(stdout);
-    }
-    if (tty) std::printf("\n");
+    show_heading(watch, *children[2], start, duration_s, request_id);
     for (auto it = children.rbegin(); it != children.rend(); ++it) (*it)->stop();
   }
-  std::lock_guard lock(watch.mutex);
-  if (!watch.result || !watch.result->success()) {
-    std::printf("no calibration result%s%s; logs in %s\n", watch.result ? ": " : "",
-                watch.result ? watch.result->message().c_str() : "", dir.c_str());
-    return 1;
-  }
-  const double before = watch.before_n ? std::sqrt(watch.before_sum_sq / static_cast<double>(watch.before_n)) : NAN;
-  const double after = watch.after_n ? std::sqrt(watch.after_sum_sq / static_cast<double>(watch.after_n)) : NAN;
-  std::printf("heading error RMS: %.1f deg before the calibration, %.2f deg from 1 s after it (%zu estimates)\n",
-              before, after, watch.after_n);
-  if (!(after < 2.0)) exit_code = 1;
-  if (exit_code == 0) {
-    std::error_code ec;
-    std::filesystem::remove_all(dir, ec);
-  } else {
-    std::printf("logs kept in %s\n", dir.c_str());
-  }
-  return exit_code;
+  return summarise(watch, dir);
 }
 
 }  // namespace bsn::services

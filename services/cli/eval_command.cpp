@@ -38,31 +38,10 @@ std::string default_scenario_dir() {
 
 namespace fs = std::filesystem;
 
-int run_eval(const EvalOptions& opt) {
-  if (opt.body_path.empty() && !opt.import.is_default()) {
-    std::fprintf(stderr, "bsn eval: error: --format, --unit and --imu go with --body (the importers' options)\n");
-    return 2;
-  }
-  if (!opt.body_path.empty()) {
-    if (opt.markdown) {
-      std::fprintf(stderr, "bsn eval: error: --markdown prints the filters' tables; with --body use --json\n");
-      return 2;
-    }
-    if (opt.inputs.size() != 1) {
-      std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");
-      return 2;
-    }
-    BodyEvalOptions b;
-    b.input = opt.inputs[0];
-    b.body_path = opt.body_path;
-    b.filters = opt.filters;
-    b.align_window = opt.align_window;
-    b.json = opt.json;
-    b.plot_path = opt.plot_path;
-    b.import = opt.import;
-    return run_body_eval(b);
-  }
-  std::vector<std::pair<std::string, fusion::FilterSpec>> filters;
+using NamedFilters = std::vector<std::pair<std::string, fusion::FilterSpec>>;
+
+/// The filters of --filter ("all" or none: every registered one); 0, or 2 (said) when one is unknown.
+int eval_filters(const EvalOptions& opt, NamedFilters& filters) {
   try {
     std::vector<std::string> args = opt.filters;
     if (args.empty()) args.push_back("all");
@@ -79,58 +58,56 @@ int run_eval(const EvalOptions& opt) {
     std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
     return 2;
   }
+  return 0;
+}
 
-  if (opt.standard_tests) {
-    if (!opt.inputs.empty()) {
-      std::fprintf(stderr, "bsn eval: error: --standard-tests runs the shipped scenarios and takes no recordings\n");
-      return 2;
-    }
-    std::vector<eval::StandardTestResult> results;
-    try {
-      results = eval::run_standard_tests(opt.scenario_dir.empty() ? default_scenario_dir() : opt.scenario_dir, filters);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
-      return 2;
-    }
-    std::fputs(opt.json       ? eval::standard_tests_json(results).c_str()
-               : opt.markdown ? eval::standard_tests_markdown(results).c_str()
-                              : eval::standard_tests_table(results).c_str(),
-               stdout);
-    int exit_code = 0;
-    std::vector<eval::TrialResult> trials;
-    for (const auto& r : results) {
-      trials.push_back(r.trial);
-      if (r.trial.non_finite > 0) {
-        std::fprintf(stderr, "bsn eval: error: %s gave %zu non-finite orientations in test %s\n", r.filter.c_str(),
-                     r.trial.non_finite, r.test.c_str());
-        exit_code = 1;
-      }
-    }
-    if (!opt.plot_path.empty()) {
-      std::ofstream out(opt.plot_path);
-      out << eval::to_svg(trials);
-      if (!out) {
-        std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
-        return 1;
-      }
-      if (!opt.json && !opt.markdown) std::printf("plot: %s\n", opt.plot_path.c_str());
-    }
-    return exit_code;
+/// --plot: the trials' error over time as SVG; 0, or 1 (said) when it cannot be written.
+int write_plot(const EvalOptions& opt, const std::vector<eval::TrialResult>& trials) {
+  if (opt.plot_path.empty()) return 0;
+  std::ofstream out(opt.plot_path);
+  out << eval::to_svg(trials);
+  if (!out) {
+    std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
+    return 1;
   }
-  if (opt.inputs.empty()) {
-    std::fprintf(stderr, "bsn eval: error: name recordings (files or folders), or give --standard-tests\n");
+  if (!opt.json && !opt.markdown) std::printf("plot: %s\n", opt.plot_path.c_str());
+  return 0;
+}
+
+/// --standard-tests: Fan et al. 2018's tests A-E on the simulator.
+int standard_tests(const EvalOptions& opt, const NamedFilters& filters) {
+  if (!opt.inputs.empty()) {
+    std::fprintf(stderr, "bsn eval: error: --standard-tests runs the shipped scenarios and takes no recordings\n");
     return 2;
   }
-
-  std::vector<fs::path> files;
+  std::vector<eval::StandardTestResult> results;
   try {
-    files = expand_recording_inputs(opt.inputs);
+    results = eval::run_standard_tests(opt.scenario_dir.empty() ? default_scenario_dir() : opt.scenario_dir, filters);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
     return 2;
   }
+  std::fputs(opt.json       ? eval::standard_tests_json(results).c_str()
+             : opt.markdown ? eval::standard_tests_markdown(results).c_str()
+                            : eval::standard_tests_table(results).c_str(),
+             stdout);
+  int exit_code = 0;
+  std::vector<eval::TrialResult> trials;
+  for (const auto& r : results) {
+    trials.push_back(r.trial);
+    if (r.trial.non_finite > 0) {
+      std::fprintf(stderr, "bsn eval: error: %s gave %zu non-finite orientations in test %s\n", r.filter.c_str(),
+                   r.trial.non_finite, r.test.c_str());
+      exit_code = 1;
+    }
+  }
+  if (const int code = write_plot(opt, trials); code != 0) return code;
+  return exit_code;
+}
 
-  std::vector<eval::TrialResult> results;
+/// Every filter on every recording named; the worst exit code (2 an unreadable recording, 1 non-finite output).
+int score_recordings(const std::vector<fs::path>& files, const NamedFilters& filters,
+                     std::vector<eval::TrialResult>& results) {
   ProgressBar bar(files.size() * filters.size());
   std::size_t done = 0;
   int exit_code = 0;
@@ -161,20 +138,56 @@ int run_eval(const EvalOptions& opt) {
     }
   }
   bar.finish();
+  return exit_code;
+}
 
+int run_eval(const EvalOptions& opt) {
+  if (opt.body_path.empty() && !opt.import.is_default()) {
+    std::fprintf(stderr, "bsn eval: error: --format, --unit and --imu go with --body (the importers' options)\n");
+    return 2;
+  }
+  if (!opt.body_path.empty()) {
+    if (opt.markdown) {
+      std::fprintf(stderr, "bsn eval: error: --markdown prints the filters' tables; with --body use --json\n");
+      return 2;
+    }
+    if (opt.inputs.size() != 1) {
+      std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");
+      return 2;
+    }
+    BodyEvalOptions b;
+    b.input = opt.inputs[0];
+    b.body_path = opt.body_path;
+    b.filters = opt.filters;
+    b.align_window = opt.align_window;
+    b.json = opt.json;
+    b.plot_path = opt.plot_path;
+    b.import = opt.import;
+    return run_body_eval(b);
+  }
+  NamedFilters filters;
+  if (const int code = eval_filters(opt, filters); code != 0) return code;
+  if (opt.standard_tests) return standard_tests(opt, filters);
+  if (opt.inputs.empty()) {
+    std::fprintf(stderr, "bsn eval: error: name recordings (files or folders), or give --standard-tests\n");
+    return 2;
+  }
+
+  std::vector<fs::path> files;
+  try {
+    files = expand_recording_inputs(opt.inputs);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bsn eval: error: %s\n", e.what());
+    return 2;
+  }
+
+  std::vector<eval::TrialResult> results;
+  const int exit_code = score_recordings(files, filters, results);
   std::fputs(opt.json       ? eval::to_json(results).c_str()
              : opt.markdown ? eval::to_markdown(results).c_str()
                             : eval::to_table(results).c_str(),
              stdout);
-  if (!opt.plot_path.empty()) {
-    std::ofstream out(opt.plot_path);
-    out << eval::to_svg(results);
-    if (!out) {
-      std::fprintf(stderr, "bsn eval: error: cannot write %s\n", opt.plot_path.c_str());
-      return 1;
-    }
-    if (!opt.json && !opt.markdown) std::printf("plot: %s\n", opt.plot_path.c_str());
-  }
+  if (const int code = write_plot(opt, results); code != 0) return code;
   return exit_code;
 }
 

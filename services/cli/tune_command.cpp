@@ -133,8 +133,8 @@ int fail(const std::string& message) {
   return 2;
 }
 
-int run_tune(const TuneOptions& opt) {
-  eval::TuneSetup setup;
+/// The filter, criterion and parameter ranges of the identification; 0, or 2 (said) when one is wrong.
+int tune_setup(const TuneOptions& opt, eval::TuneSetup& setup) {
   try {
     setup.base = eval::parse_filter_argument(opt.filter);
     (void)fusion::make_filter(setup.base);  // an unknown filter or fixed parameter fails here, before any work
@@ -151,8 +151,11 @@ int run_tune(const TuneOptions& opt) {
   setup.options.max_evaluations = opt.max_evaluations;
   setup.options.global_points = opt.global_points;
   setup.threads = opt.threads;
+  return 0;
+}
 
-  std::vector<eval::TuneRecording> recordings;
+/// The recordings named, each with a reference orientation; 0, or 2 (said) when one is unreadable or none fits.
+int tune_recordings(const TuneOptions& opt, std::vector<eval::TuneRecording>& recordings) {
   try {
     for (const auto& file : expand_recording_inputs(opt.inputs)) {
       eval::TuneRecording t{file.stem().string(), io::read_recording(file.string()), {}};
@@ -167,6 +170,99 @@ int run_tune(const TuneOptions& opt) {
     return fail("--holdout " + std::to_string(opt.holdout) + " leaves no recording to fit on (" +
                 std::to_string(recordings.size()) + " given)");
   }
+  return 0;
+}
+
+/// One identification: a label, the recordings (with the class's mask) and how many of them are held out.
+struct Job {
+  std::string label;
+  int intensity = -1;                     ///< the class with --by-intensity
+  std::vector<eval::TuneRecording> recs;  ///< with the class's mask
+  std::size_t holdout = 0;
+  std::string note;  ///< printed with the set's results
+};
+
+/// One job per intensity class that enough of the recordings hold (masks restrict the scored samples); the last
+/// `holdout` recordings are held out.
+std::vector<Job> intensity_jobs(const std::vector<eval::TuneRecording>& recordings, std::size_t holdout) {
+  std::vector<Job> jobs;
+  std::vector<std::vector<std::uint8_t>> classes;
+  for (const auto& t : recordings) classes.push_back(eval::intensity_classes(t.rec));
+  for (int c = 0; c < 4; ++c) {
+    Job job{eval::intensity_name(c), c, {}, 0, ""};
+    std::size_t skipped = 0;
+    for (std::size_t i = 0; i < recordings.size(); ++i) {
+      eval::TuneRecording t{recordings[i].name, recordings[i].rec, {}};
+      t.mask.assign(t.rec.size(), 0);
+      std::size_t n = 0;
+      for (std::size_t k = 0; k < t.rec.size(); ++k) {
+        const bool counts = t.rec.movement.empty() || t.rec.movement[k] != 0;
+        t.mask[k] = counts && classes[i][k] == c;
+        n += t.mask[k];
+      }
+      const bool held = i >= recordings.size() - holdout;
+      if (static_cast<double>(n) < kMinClassSeconds * t.rec.sampling_rate_hz) {
+        ++skipped;
+        continue;
+      }
+      job.recs.push_back(std::move(t));
+      job.holdout += held;
+    }
+    if (job.recs.size() == job.holdout) {
+      std::printf("\nintensity %s: fewer than %.0f s of it in every recording to fit on; no set identified\n",
+                  job.label.c_str(), kMinClassSeconds);
+      continue;
+    }
+    if (skipped > 0) {
+      job.note =
+          std::to_string(skipped) + " recording(s) with less than " + fmt(kMinClassSeconds) + " s of it left out\n";
+    }
+    jobs.push_back(std::move(job));
+  }
+  return jobs;
+}
+
+/// The per-class mekf sets as mekf_adaptive's table, printed and appended to `json`; 0, or 2 (said).
+int report_adaptive(const std::vector<eval::ClassSet>& class_sets, double rate_lo, double rate_hi, std::string& json) {
+  // mekf_adaptive scales sigma_a and sigma_m from table_rate_hz to the rate it runs at; recordings of different
+  // rates (more than 1 % apart) leave no single rate, so the sets are then taken as they are (0).
+  const bool one_rate = rate_hi <= rate_lo * 1.01;
+  fusion::FilterSpec adaptive;
+  try {
+    adaptive = eval::adaptive_spec_of(class_sets, one_rate ? rate_lo : 0.0);
+  } catch (const std::exception& e) {
+    return fail(e.what());
+  }
+  std::printf("\nmekf_adaptive with these sets (a class without a set keeps its default):\n%s\n",
+              filter_block(adaptive).c_str());
+  for (int c = 0; c < 4; ++c) {
+    const bool has_set = std::any_of(class_sets.begin(), class_sets.end(),
+                                     [c](const eval::ClassSet& set) { return set.intensity == c; });
+    if (!has_set) {
+      std::printf(
+          "note: %s has no set and keeps its default set; with little of it in the recordings, consider the "
+          "nearest class's set for it (README, Tuning)\n",
+          eval::intensity_name(c));
+    }
+  }
+  if (!one_rate) {
+    std::printf("note: the recordings' rates differ (%.4g to %.4g Hz): table_rate_hz 0 uses the sets unscaled\n",
+                rate_lo, rate_hi);
+  }
+  json += ", \"mekf_adaptive\": {\"name\": \"mekf_adaptive\", \"parameters\": {";
+  for (std::size_t i = 0; i < adaptive.parameters.size(); ++i) {
+    json += (i ? ", " : "") + io::json_string(adaptive.parameters[i].first) + ": " +
+            io::json_number(adaptive.parameters[i].second);
+  }
+  json += "}}";
+  return 0;
+}
+
+int run_tune(const TuneOptions& opt) {
+  eval::TuneSetup setup;
+  if (const int code = tune_setup(opt, setup); code != 0) return code;
+  std::vector<eval::TuneRecording> recordings;
+  if (const int code = tune_recordings(opt, recordings); code != 0) return code;
 
   std::printf("bsn tune: %s on %zu recording(s) (%zu fit, %zu held out), criterion %s%s, %zu parameter(s)\n",
               setup.base.name.c_str(), recordings.size(), recordings.size() - opt.holdout, opt.holdout,
@@ -175,51 +271,12 @@ int run_tune(const TuneOptions& opt) {
                                                        : " (mean total RMSE)",
               setup.ranges.size());
 
-  // One identification per class with --by-intensity (masks restrict the scored samples), else one.
-  struct Job {
-    std::string label;
-    int intensity = -1;                     ///< the class with --by-intensity
-    std::vector<eval::TuneRecording> recs;  ///< with the class's mask
-    std::size_t holdout = 0;
-    std::string note;  ///< printed with the set's results
-  };
+  // One identification per class with --by-intensity, else one.
   std::vector<Job> jobs;
   if (!opt.by_intensity) {
     jobs.push_back({"", -1, std::move(recordings), opt.holdout, ""});
   } else {
-    std::vector<std::vector<std::uint8_t>> classes;
-    for (const auto& t : recordings) classes.push_back(eval::intensity_classes(t.rec));
-    for (int c = 0; c < 4; ++c) {
-      Job job{eval::intensity_name(c), c, {}, 0, ""};
-      std::size_t skipped = 0;
-      for (std::size_t i = 0; i < recordings.size(); ++i) {
-        eval::TuneRecording t{recordings[i].name, recordings[i].rec, {}};
-        t.mask.assign(t.rec.size(), 0);
-        std::size_t n = 0;
-        for (std::size_t k = 0; k < t.rec.size(); ++k) {
-          const bool counts = t.rec.movement.empty() || t.rec.movement[k] != 0;
-          t.mask[k] = counts && classes[i][k] == c;
-          n += t.mask[k];
-        }
-        const bool held = i >= recordings.size() - opt.holdout;
-        if (static_cast<double>(n) < kMinClassSeconds * t.rec.sampling_rate_hz) {
-          ++skipped;
-          continue;
-        }
-        job.recs.push_back(std::move(t));
-        job.holdout += held;
-      }
-      if (job.recs.size() == job.holdout) {
-        std::printf("\nintensity %s: fewer than %.0f s of it in every recording to fit on; no set identified\n",
-                    job.label.c_str(), kMinClassSeconds);
-        continue;
-      }
-      if (skipped > 0) {
-        job.note =
-            std::to_string(skipped) + " recording(s) with less than " + fmt(kMinClassSeconds) + " s of it left out\n";
-      }
-      jobs.push_back(std::move(job));
-    }
+    jobs = intensity_jobs(recordings, opt.holdout);
   }
 
   // Per-class mekf sets become mekf_adaptive's table; they were identified at the recordings' rate.
@@ -261,37 +318,7 @@ int run_tune(const TuneOptions& opt) {
   }
   json += "]";
   if (!class_sets.empty()) {
-    // mekf_adaptive scales sigma_a and sigma_m from table_rate_hz to the rate it runs at; recordings of different
-    // rates (more than 1 % apart) leave no single rate, so the sets are then taken as they are (0).
-    const bool one_rate = rate_hi <= rate_lo * 1.01;
-    fusion::FilterSpec adaptive;
-    try {
-      adaptive = eval::adaptive_spec_of(class_sets, one_rate ? rate_lo : 0.0);
-    } catch (const std::exception& e) {
-      return fail(e.what());
-    }
-    std::printf("\nmekf_adaptive with these sets (a class without a set keeps its default):\n%s\n",
-                filter_block(adaptive).c_str());
-    for (int c = 0; c < 4; ++c) {
-      const bool has_set = std::any_of(class_sets.begin(), class_sets.end(),
-                                       [c](const eval::ClassSet& set) { return set.intensity == c; });
-      if (!has_set) {
-        std::printf(
-            "note: %s has no set and keeps its default set; with little of it in the recordings, consider the "
-            "nearest class's set for it (README, Tuning)\n",
-            eval::intensity_name(c));
-      }
-    }
-    if (!one_rate) {
-      std::printf("note: the recordings' rates differ (%.4g to %.4g Hz): table_rate_hz 0 uses the sets unscaled\n",
-                  rate_lo, rate_hi);
-    }
-    json += ", \"mekf_adaptive\": {\"name\": \"mekf_adaptive\", \"parameters\": {";
-    for (std::size_t i = 0; i < adaptive.parameters.size(); ++i) {
-      json += (i ? ", " : "") + io::json_string(adaptive.parameters[i].first) + ": " +
-              io::json_number(adaptive.parameters[i].second);
-    }
-    json += "}}";
+    if (const int code = report_adaptive(class_sets, rate_lo, rate_hi, json); code != 0) return code;
   }
   json += "}\n";
   if (!opt.json_path.empty()) {

@@ -212,6 +212,33 @@ std::map<std::string, std::string> metadata(const RecordOptions& opt, const fusi
           {"subject", opt.subject}};
 }
 
+/// Whether every topic named is one bsn knows; says the first that is not, with the nearest name.
+bool known_topics(const std::vector<std::string>& named, const std::vector<std::string>& known) {
+  for (const std::string& t : named) {
+    if (std::find(known.begin(), known.end(), t) == known.end()) {
+      const std::string near = nearest_name(t, known);
+      std::fprintf(stderr, "bsn record: error: unknown topic '%s'%s\n", t.c_str(),
+                   near.empty() ? "" : ("; did you mean '" + near + "'?").c_str());
+      return false;
+    }
+  }
+  return true;
+}
+
+/// One reader per recorded topic into `recorder` (kept in `readers`); `per_segment` gets the recorder's indices of
+/// the topics with one stream per segment (raw, orientation).
+void subscribe(dds::Participant& participant, Recorder& recorder, const std::vector<std::string>& topics,
+               std::vector<std::shared_ptr<void>>& readers, std::vector<std::size_t>& per_segment) {
+  dds::for_each_topic([&](const auto& topic) {
+    using PubSub = typename TopicPubSub<std::remove_cvref_t<decltype(topic)>>::type;
+    if (std::find(topics.begin(), topics.end(), topic.name) == topics.end()) return;
+    const std::size_t index = recorder.add_topic(topic.name);
+    if (topic.name == dds::kRawTopic.name || topic.name == dds::kOrientationTopic.name) per_segment.push_back(index);
+    readers.push_back(participant.make_reader(
+        topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); }));
+  });
+}
+
 }  // namespace
 
 std::vector<std::string> all_topic_names() {
@@ -223,14 +250,7 @@ std::vector<std::string> all_topic_names() {
 int run_record(const RecordOptions& opt) {
   logging::set_log_identity("record");
   const std::vector<std::string> known = all_topic_names();
-  for (const std::string& t : opt.topics) {
-    if (std::find(known.begin(), known.end(), t) == known.end()) {
-      const std::string near = nearest_name(t, known);
-      std::fprintf(stderr, "bsn record: error: unknown topic '%s'%s\n", t.c_str(),
-                   near.empty() ? "" : ("; did you mean '" + near + "'?").c_str());
-      return 2;
-    }
-  }
+  if (!known_topics(opt.topics, known)) return 2;
   const std::vector<std::string> topics = opt.topics.empty() ? known : opt.topics;
   // A full disk or a file size limit must give an error from write(), not kill the process.
   std::signal(SIGXFSZ, SIG_IGN);
@@ -253,14 +273,7 @@ int run_record(const RecordOptions& opt) {
     DdsCommandFrame frame(opt.domain, "bsn record", opt.subject);
     std::vector<std::shared_ptr<void>> readers;
     std::vector<std::size_t> per_segment;  ///< the recorded topics with one stream per segment (raw, orientation)
-    dds::for_each_topic([&](const auto& topic) {
-      using PubSub = typename TopicPubSub<std::remove_cvref_t<decltype(topic)>>::type;
-      if (std::find(topics.begin(), topics.end(), topic.name) == topics.end()) return;
-      const std::size_t index = recorder.add_topic(topic.name);
-      if (topic.name == dds::kRawTopic.name || topic.name == dds::kOrientationTopic.name) per_segment.push_back(index);
-      readers.push_back(frame.participant().make_reader(
-          topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); }));
-    });
+    subscribe(frame.participant(), recorder, topics, readers, per_segment);
     logging::log_info("recording ", topics.size(), " topics to ", opt.out, " in domain ", opt.domain);
     const bool terminal = isatty(STDERR_FILENO) != 0;
     const auto start = Clock::now();

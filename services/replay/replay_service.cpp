@@ -24,15 +24,9 @@ std::vector<ReplayTrack> load_session(const std::string& path) {
   for (const io::SessionStream& s : reader.streams_of(dds::kRawTopic.name)) {
     ReplayTrack t;
     t.node = s.key;
-    t.timestamp_ns = reader.read_u64(s, "timestamp_ns");
-    t.seq = reader.read_u64(s, "seq");
-    t.acc = reader.read_f64(s, "acc", 3);
-    t.gyr = reader.read_f64(s, "gyr", 3);
-    t.mag = reader.read_f64(s, "mag", 3);
-    t.channels = reader.read_u32(s, "channels");
+    static_cast<RawColumns&>(t) = read_raw_columns(reader, s);
     // A recording stopped by a crash may hold one column a write ahead of another: keep the rows all have.
-    const std::size_t n = std::min(
-        {t.timestamp_ns.size(), t.seq.size(), t.acc.size() / 3, t.gyr.size() / 3, t.mag.size() / 3, t.channels.size()});
+    const std::size_t n = std::min(t.seq.size(), t.measurement_rows());
     if (n != t.timestamp_ns.size() || n != t.channels.size()) {
       logging::log_warn(path, ": ", s.group, ": columns of different lengths, replaying the first ", n, " samples");
     }
@@ -139,6 +133,46 @@ bool map_nodes(std::vector<ReplayTrack>& tracks, const std::vector<std::string>&
   return true;
 }
 
+/// The tracks' common time: one origin for all (they share the recording host's clock), so their alignment is kept.
+struct Timeline {
+  std::uint64_t t0 = UINT64_MAX, t_end = 0, samples = 0;
+  std::uint64_t loop_span = 0;  ///< a loop's next pass starts this much later
+};
+
+Timeline timeline_of(const std::vector<ReplayTrack>& tracks) {
+  Timeline tl;
+  for (const auto& t : tracks) {
+    tl.t0 = std::min(tl.t0, t.timestamp_ns.front());
+    tl.t_end = std::max(tl.t_end, t.timestamp_ns.back());
+    tl.samples += t.size();
+  }
+  // A loop continues time and sequence numbers: the next pass starts one mean interval after the last sample.
+  std::uint64_t mean_dt = 10000000u;  // 10 ms when no track has two samples
+  for (const auto& t : tracks) {
+    if (t.size() >= 2) {
+      mean_dt = std::max<std::uint64_t>(1, (t.timestamp_ns.back() - t.timestamp_ns.front()) / (t.size() - 1));
+      break;
+    }
+  }
+  tl.loop_span = tl.t_end - tl.t0 + mean_dt;
+  return tl;
+}
+
+/// Waits (at most --wait s) until --readers readers have matched; false at a shutdown.
+bool wait_for_readers(const dds::Writer<bsn::RawSample>& writer, const ReplayOptions& opt) {
+  if (opt.readers <= 0) return true;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.wait_s);
+  while (writer.matched() < opt.readers && std::chrono::steady_clock::now() < deadline) {
+    if (!dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) return false;
+  }
+  if (writer.matched() < opt.readers) {
+    logging::log_warn("only ", writer.matched(), " of ", opt.readers, " readers matched after ", opt.wait_s,
+                      " s; starting anyway");
+  }
+  // The reader side learns of this writer a moment after the writer sees it; samples before that are lost.
+  return dds::sleep_unless_shutdown(std::chrono::milliseconds(300));
+}
+
 }  // namespace
 
 int run_replay(const ReplayOptions& opt) {
@@ -153,22 +187,8 @@ int run_replay(const ReplayOptions& opt) {
   }
   if (!map_nodes(tracks, opt.node_map)) return 2;
 
-  // One time origin for all tracks (they share the recording host's clock), so their alignment is kept.
-  std::uint64_t t0 = UINT64_MAX, t_end = 0, samples = 0;
-  for (const auto& t : tracks) {
-    t0 = std::min(t0, t.timestamp_ns.front());
-    t_end = std::max(t_end, t.timestamp_ns.back());
-    samples += t.size();
-  }
-  // A loop continues time and sequence numbers: the next pass starts one mean interval after the last sample.
-  std::uint64_t mean_dt = 10000000u;  // 10 ms when no track has two samples
-  for (const auto& t : tracks) {
-    if (t.size() >= 2) {
-      mean_dt = std::max<std::uint64_t>(1, (t.timestamp_ns.back() - t.timestamp_ns.front()) / (t.size() - 1));
-      break;
-    }
-  }
-  const std::uint64_t loop_span = t_end - t0 + mean_dt;
+  const Timeline tl = timeline_of(tracks);
+  const std::uint64_t t0 = tl.t0, t_end = tl.t_end, samples = tl.samples, loop_span = tl.loop_span;
 
   DdsCommandFrame frame(opt.domain, "bsn replay");
   // One writer for every node, or, secured, one per node: each in its node's partition (Participant::make_writer).
@@ -181,18 +201,7 @@ int run_replay(const ReplayOptions& opt) {
     writers.push_back(frame.participant().make_writer(dds::kRawTopic, std::nullopt, t.node));
   }
   dds::Writer<bsn::RawSample>* writer = writers.front().get();
-  if (opt.readers > 0) {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(opt.wait_s);
-    while (writer->matched() < opt.readers && std::chrono::steady_clock::now() < deadline) {
-      if (!dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) return 0;
-    }
-    if (writer->matched() < opt.readers) {
-      logging::log_warn("only ", writer->matched(), " of ", opt.readers, " readers matched after ", opt.wait_s,
-                        " s; starting anyway");
-    }
-    // The reader side learns of this writer a moment after the writer sees it; samples before that are lost.
-    if (!dds::sleep_unless_shutdown(std::chrono::milliseconds(300))) return 0;
-  }
+  if (!wait_for_readers(*writer, opt)) return 0;
   logging::log_info("replaying ", samples, " samples of ", tracks.size(), " nodes (",
                     static_cast<double>(t_end - t0) * 1e-9, " s) at ",
                     opt.speed == 0.0 ? std::string("full speed") : "speed " + std::to_string(opt.speed));

@@ -9,17 +9,13 @@
 #include <vector>
 
 #include "command.hpp"
+#include "session_streams.hpp"
 
 namespace bsn::services {
 
 /// The raw samples of one node, as columns.
-struct ReplayTrack {
+struct ReplayTrack : RawColumns {
   std::string node;
-  std::vector<std::uint64_t> timestamp_ns;
-  std::vector<std::uint64_t> seq;
-  std::vector<double> acc, gyr, mag;  ///< 3 per sample
-  std::vector<std::uint32_t> channels;
-  std::size_t size() const { return timestamp_ns.size(); }
 };
 
 /// Reads every raw track of `path`: a session file (one track per node of bsn/raw), a BROAD-layout HDF5 or CSV

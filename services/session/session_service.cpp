@@ -98,6 +98,211 @@ int run_to_end(const std::vector<std::string>& argv, const std::string& log, std
   return status && WIFEXITED(*status) ? WEXITSTATUS(*status) : -1;
 }
 
+/// The session's alignment request and the calibration service's replies to it.
+struct AlignmentChannel {
+  std::mutex mutex;
+  std::string instruction;                                ///< the service's latest instruction
+  std::map<std::string, bsn::CalibrationResult> results;  ///< by node
+  const std::string request_id =
+      "session-" + std::to_string(getpid()) + "-" + std::to_string(static_cast<long long>(std::time(nullptr)));
+  std::unique_ptr<dds::Writer<bsn::CalibrationRequest>> request_writer;
+  std::unique_ptr<dds::Reader<bsn::CalibrationProgress>> progress_reader;
+  std::unique_ptr<dds::Reader<bsn::CalibrationResult>> result_reader;
+
+  explicit AlignmentChannel(dds::Participant& participant) {
+    request_writer = participant.make_writer(dds::kCalibrationRequestTopic);
+    progress_reader = participant.make_reader(
+        dds::kCalibrationProgressTopic,
+        [this](const bsn::CalibrationProgress& p, const eprosima::fastdds::dds::SampleInfo&) {
+          if (p.request_id() != request_id) return;
+          std::lock_guard lock(mutex);
+          instruction = logging::printable(
+              p.phase() == bsn::CALIBRATION_PHASE_REFUSED ? "REFUSED: " + p.message() : p.instruction(), 200);
+        });
+    result_reader =
+        participant.make_reader(dds::kCalibrationResultTopic,
+                                [this](const bsn::CalibrationResult& r, const eprosima::fastdds::dds::SampleInfo&) {
+                                  if (r.request_id() != request_id || r.kind() != bsn::CALIBRATION_SEGMENT_ALIGNMENT)
+                                    return;
+                                  std::lock_guard lock(mutex);
+                                  results[r.node_id()] = r;
+                                });
+  }
+};
+
+/// What every step of a session run shares.
+struct SessionRun {
+  const SessionSpec& spec;
+  const fusion::BodyModel& body;
+  Processes& procs;
+  std::string self;
+  std::string dom;
+};
+
+/// The calibration service (once it answers), the fusion, the alignment request, the simulated or real nodes and
+/// bsn view. Throws std::runtime_error when the calibration service does not answer.
+void start_processes(const SessionRun& run, AlignmentChannel& alignment) {
+  const SessionSpec& spec = run.spec;
+  const std::string& self = run.self;
+  const std::string& dom = run.dom;
+  Processes& procs = run.procs;
+  // The calibration service first: the alignment request must reach it before the N-pose begins.
+  procs.start("calibration", {self, "calibration", "--domain", dom, "--store", spec.store_dir});
+  const auto deadline = Clock::now() + std::chrono::seconds(20);
+  while ((alignment.request_writer->matched() == 0 || alignment.progress_reader->matched() == 0 ||
+          alignment.result_reader->matched() == 0) &&
+         Clock::now() < deadline && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
+  }
+  if (alignment.request_writer->matched() == 0 || alignment.result_reader->matched() == 0)
+    throw std::runtime_error("bsn calibration did not answer; see " + procs.log("calibration"));
+  procs.start("fusion", {self, "fusion", "--domain", dom, "--body", spec.body_path});
+  if (spec.align) {
+    bsn::CalibrationRequest request;
+    request.request_id(alignment.request_id);
+    request.node_id("*");
+    request.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
+    request.body(config::body_model_to_yaml(run.body));
+    request.pose_s(spec.pose_s);
+    request.duration_s(spec.align_duration_s);
+    request.until_good(true);
+    alignment.request_writer->write(request);
+  }
+  if (!spec.scenario.empty()) {
+    // One common start, a few seconds ahead: every process and its discovery are up by then.
+    char start_at[32];
+    std::snprintf(start_at, sizeof start_at, "%.3f", wall_seconds() + 3.0);
+    for (const auto& s : run.body.segments)
+      procs.start("sim-" + s.node, {self, "sim", "--domain", dom, "--node", s.node, "--segment", s.name, "--scenario",
+                                    spec.scenario, "--start-at", start_at});
+  }
+  for (const auto& n : spec.nodes) {
+    std::vector<std::string> argv{self, "node", "--domain", dom, "--node", n.node, "--source", n.source};
+    if (!n.map.empty()) argv.insert(argv.end(), {"--map", n.map});
+    procs.start("node-" + n.node, argv);
+  }
+  if (spec.view) {
+    procs.start("view", {self, "view", "--domain", dom, "--port", std::to_string(spec.view_port)});
+    std::printf("bsn session: live 3D view at http://127.0.0.1:%d/\n", spec.view_port);
+  }
+}
+
+/// The alignment, guided by the service's instructions; every node of the body must succeed. Returns 0, else 1.
+int guide_alignment(const SessionRun& run, AlignmentChannel& alignment) {
+  int code = 0;
+  std::string shown;
+  auto last_print = Clock::now();
+  const auto deadline = Clock::now() + std::chrono::duration<double>(run.spec.align_duration_s + 20.0);
+  bool done = false;
+  while (!done && Clock::now() < std::chrono::time_point_cast<Clock::duration>(deadline) &&
+         dds::sleep_unless_shutdown(std::chrono::milliseconds(50))) {
+    if (const std::string gone = run.procs.ended(); !gone.empty()) {
+      logging::log_error(gone, " ended during the alignment; see ", run.procs.log(gone));
+      code = 1;
+      break;
+    }
+    std::lock_guard lock(alignment.mutex);
+    // A new step at once; the same step's countdown at most once a second.
+    const auto now = Clock::now();
+    const auto step = [](const std::string& t) { return t.substr(0, t.find_first_of("0123456789")); };
+    const std::string& instruction = alignment.instruction;
+    if (instruction != shown && (step(instruction) != step(shown) || now - last_print >= std::chrono::seconds(1))) {
+      shown = instruction;
+      last_print = now;
+      std::printf("alignment: %s\n", shown.c_str());
+      std::fflush(stdout);
+    }
+    done = alignment.results.size() == run.body.segments.size();
+  }
+  std::lock_guard lock(alignment.mutex);
+  if (code == 0 && !done) {
+    logging::log_error("the alignment did not finish: ", alignment.results.size(), " of ", run.body.segments.size(),
+                       " nodes answered (see ", run.procs.log("calibration"), ")");
+    code = 1;
+  }
+  for (const auto& [node, r] : alignment.results) {
+    if (r.success()) {
+      std::printf("alignment: %s aligned (%s)\n", logging::printable(node).c_str(),
+                  logging::printable(r.alignment_source()).c_str());
+    } else {
+      std::printf("alignment: %s FAILED: %s\n", logging::printable(node).c_str(),
+                  logging::printable(r.message(), 200).c_str());
+      code = 1;
+    }
+  }
+  std::fflush(stdout);
+  return code;
+}
+
+/// While `recorder` runs: each line on the terminal is an event, written to `events` with both clocks. Returns the
+/// events marked; `stdin_open` goes false once the terminal's input is closed (or /dev/null).
+int mark_events(dds::ChildProcess& recorder, std::ofstream& events, const std::string& trial, bool& stdin_open) {
+  int marks = 0;
+  while (recorder.running() && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
+    if (!stdin_open) continue;
+    pollfd in{STDIN_FILENO, POLLIN, 0};
+    if (poll(&in, 1, 0) <= 0 || !(in.revents & (POLLIN | POLLHUP))) continue;
+    char line[256];
+    const ssize_t n = read(STDIN_FILENO, line, sizeof line - 1);
+    if (n <= 0) {
+      stdin_open = false;  // closed (or /dev/null): no markers from the terminal
+      continue;
+    }
+    line[n] = '\0';
+    std::string label(line);
+    while (!label.empty() && (label.back() == '\n' || label.back() == '\r')) label.pop_back();
+    // The monotonic clock is the simulated nodes' sensor clock on this host (bsn sim); real sensors have
+    // their own, so the Unix time goes along.
+    events << clock_ns(CLOCK_REALTIME) << "," << clock_ns(CLOCK_MONOTONIC) << ","
+           << (label.empty() ? "event " + std::to_string(marks + 1) : logging::printable(label, 64)) << "\n";
+    events.flush();
+    std::printf("trial %s: event %d marked\n", trial.c_str(), ++marks);
+    std::fflush(stdout);
+  }
+  return marks;
+}
+
+/// One trial: recorded for its duration, its event markers (a line on the terminal) beside it, exported. Returns 0,
+/// or 1 (said) when the recording or an export failed.
+int record_trial(const SessionRun& run, const std::string& trial, bool& stdin_open) {
+  const SessionSpec& spec = run.spec;
+  const std::string h5 = (fs::path(spec.out_dir) / (trial + ".h5")).string();
+  std::printf("trial %s: recording %.0f s to %s (Enter marks an event)\n", trial.c_str(), spec.record_s, h5.c_str());
+  std::fflush(stdout);
+  std::vector<std::string> argv{
+      run.self, "record",      "--domain", run.dom, "--out", h5, "--duration", std::to_string(spec.record_s),
+      "--body", spec.body_path};
+  for (const auto& topic : spec.topics) argv.insert(argv.end(), {"--topic", topic});
+  dds::ChildProcess recorder(argv, run.procs.log("record-" + trial));
+  const std::string events_path = (fs::path(spec.out_dir) / (trial + ".events.csv")).string();
+  std::ofstream events(events_path);
+  events << "unix_ns,monotonic_ns,label\n";
+  const int marks = mark_events(recorder, events, trial, stdin_open);
+  const auto status = recorder.running() ? recorder.stop() : recorder.wait_for(std::chrono::milliseconds(0));
+  events.close();
+  if (!status || !WIFEXITED(*status) || WEXITSTATUS(*status) != 0) {
+    logging::log_error("recording ", h5, " failed; see ", run.procs.log("record-" + trial));
+    return 1;
+  }
+  int code = 0;
+  const fs::path export_dir = fs::path(spec.out_dir) / trial;
+  for (const auto& format : spec.exports) {
+    const int c = run_to_end({run.self, "export", h5, "--format", format, "--out", export_dir.string()},
+                             run.procs.log("export-" + trial + "-" + format), std::chrono::seconds(300));
+    if (c != 0) {
+      logging::log_error("export of ", h5, " as ", format, " failed; see ",
+                         run.procs.log("export-" + trial + "-" + format));
+      code = 1;
+    }
+  }
+  std::error_code ec;
+  if (!spec.exports.empty())
+    fs::copy_file(events_path, export_dir / "events.csv", fs::copy_options::overwrite_existing, ec);
+  std::printf("trial %s: %d events; %s%s\n", trial.c_str(), marks, h5.c_str(),
+              spec.exports.empty() ? "" : (", exported to " + export_dir.string()).c_str());
+  std::fflush(stdout);
+  return code;
+}
+
 int run_session(const std::string& file, int domain) {
   SessionSpec spec;
   fusion::BodyModel body;
@@ -127,185 +332,26 @@ int run_session(const std::string& file, int domain) {
     return 1;
   }
   dds::install_shutdown_handlers();
-  const std::string self = dds::self_executable();
-  const std::string dom = std::to_string(domain);
-  const std::string body_yaml = config::body_model_to_yaml(body);
   std::printf("bsn session '%s': body %s (%zu segments), domain %d, trials in %s\n", spec.name.c_str(),
               spec.body_path.c_str(), body.segments.size(), domain, spec.out_dir.c_str());
   std::fflush(stdout);
 
   int code = 0;
   Processes procs(logs);
+  const SessionRun run{spec, body, procs, dds::self_executable(), std::to_string(domain)};
   {
     dds::Participant participant({domain, "bsn session"});
-    auto request_writer = participant.make_writer(dds::kCalibrationRequestTopic);
-    std::mutex mutex;
-    std::string instruction;
-    std::map<std::string, bsn::CalibrationResult> results;
-    const std::string request_id =
-        "session-" + std::to_string(getpid()) + "-" + std::to_string(static_cast<long long>(std::time(nullptr)));
-    auto progress_reader = participant.make_reader(
-        dds::kCalibrationProgressTopic,
-        [&](const bsn::CalibrationProgress& p, const eprosima::fastdds::dds::SampleInfo&) {
-          if (p.request_id() != request_id) return;
-          std::lock_guard lock(mutex);
-          instruction = logging::printable(
-              p.phase() == bsn::CALIBRATION_PHASE_REFUSED ? "REFUSED: " + p.message() : p.instruction(), 200);
-        });
-    auto result_reader = participant.make_reader(
-        dds::kCalibrationResultTopic, [&](const bsn::CalibrationResult& r, const eprosima::fastdds::dds::SampleInfo&) {
-          if (r.request_id() != request_id || r.kind() != bsn::CALIBRATION_SEGMENT_ALIGNMENT) return;
-          std::lock_guard lock(mutex);
-          results[r.node_id()] = r;
-        });
+    AlignmentChannel alignment(participant);
     try {
-      // The calibration service first: the alignment request must reach it before the N-pose begins.
-      procs.start("calibration", {self, "calibration", "--domain", dom, "--store", spec.store_dir});
-      const auto deadline = Clock::now() + std::chrono::seconds(20);
-      while ((request_writer->matched() == 0 || progress_reader->matched() == 0 || result_reader->matched() == 0) &&
-             Clock::now() < deadline && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
-      }
-      if (request_writer->matched() == 0 || result_reader->matched() == 0)
-        throw std::runtime_error("bsn calibration did not answer; see " + procs.log("calibration"));
-      procs.start("fusion", {self, "fusion", "--domain", dom, "--body", spec.body_path});
-      if (spec.align) {
-        bsn::CalibrationRequest request;
-        request.request_id(request_id);
-        request.node_id("*");
-        request.kind(bsn::CALIBRATION_SEGMENT_ALIGNMENT);
-        request.body(body_yaml);
-        request.pose_s(spec.pose_s);
-        request.duration_s(spec.align_duration_s);
-        request.until_good(true);
-        request_writer->write(request);
-      }
-      if (!spec.scenario.empty()) {
-        // One common start, a few seconds ahead: every process and its discovery are up by then.
-        char start_at[32];
-        std::snprintf(start_at, sizeof start_at, "%.3f", wall_seconds() + 3.0);
-        for (const auto& s : body.segments)
-          procs.start("sim-" + s.node, {self, "sim", "--domain", dom, "--node", s.node, "--segment", s.name,
-                                        "--scenario", spec.scenario, "--start-at", start_at});
-      }
-      for (const auto& n : spec.nodes) {
-        std::vector<std::string> argv{self, "node", "--domain", dom, "--node", n.node, "--source", n.source};
-        if (!n.map.empty()) argv.insert(argv.end(), {"--map", n.map});
-        procs.start("node-" + n.node, argv);
-      }
-      if (spec.view) {
-        procs.start("view", {self, "view", "--domain", dom, "--port", std::to_string(spec.view_port)});
-        std::printf("bsn session: live 3D view at http://127.0.0.1:%d/\n", spec.view_port);
-      }
+      start_processes(run, alignment);
     } catch (const std::exception& e) {
       logging::log_error("cannot start the session's processes: ", e.what());
       code = 1;
     }
-
-    // The alignment, guided by the service's instructions; every node of the body must succeed.
-    if (code == 0 && spec.align) {
-      std::string shown;
-      auto last_print = Clock::now();
-      const auto deadline = Clock::now() + std::chrono::duration<double>(spec.align_duration_s + 20.0);
-      bool done = false;
-      while (!done && Clock::now() < std::chrono::time_point_cast<Clock::duration>(deadline) &&
-             dds::sleep_unless_shutdown(std::chrono::milliseconds(50))) {
-        if (const std::string gone = procs.ended(); !gone.empty()) {
-          logging::log_error(gone, " ended during the alignment; see ", procs.log(gone));
-          code = 1;
-          break;
-        }
-        std::lock_guard lock(mutex);
-        // A new step at once; the same step's countdown at most once a second.
-        const auto now = Clock::now();
-        const auto step = [](const std::string& t) { return t.substr(0, t.find_first_of("0123456789")); };
-        if (instruction != shown && (step(instruction) != step(shown) || now - last_print >= std::chrono::seconds(1))) {
-          shown = instruction;
-          last_print = now;
-          std::printf("alignment: %s\n", shown.c_str());
-          std::fflush(stdout);
-        }
-        done = results.size() == body.segments.size();
-      }
-      std::lock_guard lock(mutex);
-      if (code == 0 && !done) {
-        logging::log_error("the alignment did not finish: ", results.size(), " of ", body.segments.size(),
-                           " nodes answered (see ", procs.log("calibration"), ")");
-        code = 1;
-      }
-      for (const auto& [node, r] : results) {
-        if (r.success()) {
-          std::printf("alignment: %s aligned (%s)\n", logging::printable(node).c_str(),
-                      logging::printable(r.alignment_source()).c_str());
-        } else {
-          std::printf("alignment: %s FAILED: %s\n", logging::printable(node).c_str(),
-                      logging::printable(r.message(), 200).c_str());
-          code = 1;
-        }
-      }
-      std::fflush(stdout);
-    }
-
-    // The trials: each recorded for its duration, its event markers (a line on the terminal) beside it, exported.
+    if (code == 0 && spec.align) code = guide_alignment(run, alignment);
     bool stdin_open = true;
-    for (std::size_t t = 0; code == 0 && t < spec.trials.size() && !dds::shutdown_requested(); ++t) {
-      const std::string& trial = spec.trials[t];
-      const std::string h5 = (fs::path(spec.out_dir) / (trial + ".h5")).string();
-      std::printf("trial %s: recording %.0f s to %s (Enter marks an event)\n", trial.c_str(), spec.record_s,
-                  h5.c_str());
-      std::fflush(stdout);
-      std::vector<std::string> argv{
-          self,     "record",      "--domain", dom, "--out", h5, "--duration", std::to_string(spec.record_s),
-          "--body", spec.body_path};
-      for (const auto& topic : spec.topics) argv.insert(argv.end(), {"--topic", topic});
-      dds::ChildProcess recorder(argv, procs.log("record-" + trial));
-      const std::string events_path = (fs::path(spec.out_dir) / (trial + ".events.csv")).string();
-      std::ofstream events(events_path);
-      events << "unix_ns,monotonic_ns,label\n";
-      int marks = 0;
-      while (recorder.running() && dds::sleep_unless_shutdown(std::chrono::milliseconds(20))) {
-        if (!stdin_open) continue;
-        pollfd in{STDIN_FILENO, POLLIN, 0};
-        if (poll(&in, 1, 0) <= 0 || !(in.revents & (POLLIN | POLLHUP))) continue;
-        char line[256];
-        const ssize_t n = read(STDIN_FILENO, line, sizeof line - 1);
-        if (n <= 0) {
-          stdin_open = false;  // closed (or /dev/null): no markers from the terminal
-          continue;
-        }
-        line[n] = '\0';
-        std::string label(line);
-        while (!label.empty() && (label.back() == '\n' || label.back() == '\r')) label.pop_back();
-        // The monotonic clock is the simulated nodes' sensor clock on this host (bsn sim); real sensors have
-        // their own, so the Unix time goes along.
-        events << clock_ns(CLOCK_REALTIME) << "," << clock_ns(CLOCK_MONOTONIC) << ","
-               << (label.empty() ? "event " + std::to_string(marks + 1) : logging::printable(label, 64)) << "\n";
-        events.flush();
-        std::printf("trial %s: event %d marked\n", trial.c_str(), ++marks);
-        std::fflush(stdout);
-      }
-      const auto status = recorder.running() ? recorder.stop() : recorder.wait_for(std::chrono::milliseconds(0));
-      events.close();
-      if (!status || !WIFEXITED(*status) || WEXITSTATUS(*status) != 0) {
-        logging::log_error("recording ", h5, " failed; see ", procs.log("record-" + trial));
-        code = 1;
-        break;
-      }
-      const fs::path export_dir = fs::path(spec.out_dir) / trial;
-      for (const auto& format : spec.exports) {
-        const int c = run_to_end({self, "export", h5, "--format", format, "--out", export_dir.string()},
-                                 procs.log("export-" + trial + "-" + format), std::chrono::seconds(300));
-        if (c != 0) {
-          logging::log_error("export of ", h5, " as ", format, " failed; see ",
-                             procs.log("export-" + trial + "-" + format));
-          code = 1;
-        }
-      }
-      if (!spec.exports.empty())
-        fs::copy_file(events_path, export_dir / "events.csv", fs::copy_options::overwrite_existing, ec);
-      std::printf("trial %s: %d events; %s%s\n", trial.c_str(), marks, h5.c_str(),
-                  spec.exports.empty() ? "" : (", exported to " + export_dir.string()).c_str());
-      std::fflush(stdout);
-    }
+    for (std::size_t t = 0; code == 0 && t < spec.trials.size() && !dds::shutdown_requested(); ++t)
+      code = record_trial(run, spec.trials[t], stdin_open);
   }
   if (!procs.stop_all() && code == 0) code = 1;
   std::printf("bsn session '%s': %s; every process stopped\n", spec.name.c_str(), code == 0 ? "done" : "FAILED");

@@ -180,6 +180,36 @@ class Parser : public config::YamlReader<ScenarioError> {
     return r;
   }
 
+  // The lower body's gait; takes the moves parsed into spec.free_motion (a lower body's 'moves' carry the body).
+  Gait gait_of(const YAML::Node& g, ScenarioSpec& spec) const {
+    check_keys(g, {"cadence_steps_per_min", "speed_m_s", "heading_deg", "alignment", "active"}, "body.gait");
+    Gait gait;
+    if (g["cadence_steps_per_min"]) gait.cadence_steps_per_min = positive(g["cadence_steps_per_min"], "cadence");
+    if (g["speed_m_s"]) gait.speed_m_s = non_negative(g["speed_m_s"], "speed_m_s");
+    if (g["heading_deg"]) gait.heading_rad = number(g["heading_deg"], "heading_deg") * kDeg;
+    if (const YAML::Node a = g["alignment"]) {
+      check_keys(a, {"pose_s", "flexions_per_leg", "flexion_s"}, "body.gait.alignment");
+      AlignmentMoves moves;
+      if (a["pose_s"]) moves.pose_s = positive(a["pose_s"], "pose_s");
+      if (a["flexion_s"]) moves.flexion_s = positive(a["flexion_s"], "flexion_s");
+      if (a["flexions_per_leg"]) {
+        const double count = positive(a["flexions_per_leg"], "flexions_per_leg");
+        if (count != std::floor(count) || count > 20) fail(a["flexions_per_leg"], "flexions_per_leg must be 1..20");
+        moves.flexions_per_leg = static_cast<int>(count);
+      }
+      gait.alignment = moves;
+    }
+    if (g["active"]) {
+      if (g["alignment"]) fail(g["active"], "give either alignment or active windows, not both");
+      if (gait.speed_m_s > 0.0)
+        fail(g["active"], "active windows need speed_m_s: 0 (walking on the spot; 'moves' carries the body)");
+      gait.active = windows(g["active"], "active", 1.0);
+    }
+    gait.moves = std::move(spec.free_motion.moves);  // the lower body's moves, parsed above
+    spec.free_motion.moves.clear();
+    return gait;
+  }
+
   void body(const YAML::Node& n, ScenarioSpec& spec) const {
     check_keys(
         n, {"kind", "segment", "pose", "random", "rotations", "moves", "pose_sequence", "gait", "reaching", "mounting"},
@@ -257,34 +287,7 @@ class Parser : public config::YamlReader<ScenarioError> {
         if (spec.mounting.max_offset_m > 0.2) fail(m["max_offset_m"], "max_offset_m must be 0..0.2");
       }
     }
-    if (const YAML::Node g = n["gait"]) {
-      check_keys(g, {"cadence_steps_per_min", "speed_m_s", "heading_deg", "alignment", "active"}, "body.gait");
-      Gait gait;
-      if (g["cadence_steps_per_min"]) gait.cadence_steps_per_min = positive(g["cadence_steps_per_min"], "cadence");
-      if (g["speed_m_s"]) gait.speed_m_s = non_negative(g["speed_m_s"], "speed_m_s");
-      if (g["heading_deg"]) gait.heading_rad = number(g["heading_deg"], "heading_deg") * kDeg;
-      if (const YAML::Node a = g["alignment"]) {
-        check_keys(a, {"pose_s", "flexions_per_leg", "flexion_s"}, "body.gait.alignment");
-        AlignmentMoves moves;
-        if (a["pose_s"]) moves.pose_s = positive(a["pose_s"], "pose_s");
-        if (a["flexion_s"]) moves.flexion_s = positive(a["flexion_s"], "flexion_s");
-        if (a["flexions_per_leg"]) {
-          const double count = positive(a["flexions_per_leg"], "flexions_per_leg");
-          if (count != std::floor(count) || count > 20) fail(a["flexions_per_leg"], "flexions_per_leg must be 1..20");
-          moves.flexions_per_leg = static_cast<int>(count);
-        }
-        gait.alignment = moves;
-      }
-      if (g["active"]) {
-        if (g["alignment"]) fail(g["active"], "give either alignment or active windows, not both");
-        if (gait.speed_m_s > 0.0)
-          fail(g["active"], "active windows need speed_m_s: 0 (walking on the spot; 'moves' carries the body)");
-        gait.active = windows(g["active"], "active", 1.0);
-      }
-      gait.moves = std::move(spec.free_motion.moves);  // the lower body's moves, parsed above
-      spec.free_motion.moves.clear();
-      spec.gait = gait;
-    }
+    if (const YAML::Node g = n["gait"]) spec.gait = gait_of(g, spec);
     if (const YAML::Node r = n["reaching"]) {
       check_keys(r, {"period_s", "shoulder_flexion_deg"}, "body.reaching");
       Reaching reaching;

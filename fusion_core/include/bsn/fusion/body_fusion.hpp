@@ -145,6 +145,12 @@ class BodyFusion {
   const std::vector<std::string>& unknown_nodes() const { return unknown_nodes_; }
 
  private:
+  /// Whether `source` may feed `seg`: the first writer heard owns a node, another takes it over once the owner is
+  /// silent. False fills `r` with the rejection.
+  bool admit_source(Segment& seg, std::uint64_t arrival_ns, const SourceId& source, SampleResult& r);
+  /// The joint of `seg` (segment r.segment) to its parent into r.joint, once the parent has an orientation.
+  void estimate_joint(Segment& seg, SampleResult& r);
+
   BodyModel body_;
   std::uint64_t stale_timeout_ns_, discovery_end_ns_, max_joint_extrapolation_ns_;
   std::vector<Segment> segments_;

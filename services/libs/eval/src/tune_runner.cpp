@@ -198,12 +198,7 @@ fusion::FilterSpec adaptive_spec_of(const std::vector<ClassSet>& sets, double ta
 io::Recording simulate_recording(const sim::ScenarioSpec& spec, bool ideal) {
   sim::ScenarioRunner runner(spec, {}, ideal);
   const auto n = static_cast<Eigen::Index>(runner.sample_count());
-  io::Recording rec;
-  rec.sampling_rate_hz = spec.rate_hz;
-  rec.gyr.resize(n, 3);
-  rec.acc.resize(n, 3);
-  rec.mag.resize(n, 3);
-  rec.opt_quat.resize(n, 4);
+  io::Recording rec = io::sized_recording(spec.rate_hz, n);
   rec.movement.reserve(static_cast<std::size_t>(n));
   rec.timestamp_ns.reserve(static_cast<std::size_t>(n));
   std::vector<sim::ScenarioSample> out;
@@ -211,13 +206,7 @@ io::Recording simulate_recording(const sim::ScenarioSpec& spec, bool ideal) {
   while (runner.next(out)) {
     const sim::ScenarioSample& s = out.front();
     if (s.dropped) continue;
-    rec.gyr.row(k) = s.sample.gyr.transpose();
-    rec.acc.row(k) = s.sample.acc.transpose();
-    if (s.sample.has_mag) {
-      rec.mag.row(k) = s.sample.mag.transpose();
-    } else {
-      rec.mag.row(k).setConstant(kNaN);
-    }
+    io::set_measurement_row(rec, k, s.sample);
     rec.opt_quat.row(k) << s.truth.w(), s.truth.x(), s.truth.y(), s.truth.z();
     rec.movement.push_back(s.movement ? 1 : 0);
     rec.timestamp_ns.push_back(s.sample.timestamp_ns);

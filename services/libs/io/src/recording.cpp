@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <stdexcept>
@@ -76,6 +77,96 @@ HeaderCell header_cell(const std::string& cell) {
   return h;
 }
 
+/// A CSV recording's header: its columns and the units stated in it, and the --unit options given.
+struct CsvHeader {
+  const std::string& path;
+  const UnitOptions& units;
+  int line = 0;                                 ///< its line number
+  std::map<std::string, std::size_t> col;       ///< column name -> index
+  std::map<std::string, std::string> col_unit;  ///< column -> unit stated in the header
+
+  std::string at() const { return path + ":" + std::to_string(line) + ": "; }
+  std::size_t need(const char* name) const {
+    if (!col.contains(name)) throw FormatError(at() + "missing column '" + name + "'");
+    return col.at(name);
+  }
+  /// The factor of a column into bsn's unit: its header's unit, else the --unit given, else the format's default.
+  /// A name that fixes the unit (t_s, t_ns) takes no other; a header unit and a different --unit is an error.
+  double factor(const std::string& column, const std::string& quantity, const std::string& default_unit,
+                bool name_fixes_unit) const {
+    const auto stated = col_unit.find(column);
+    const auto given = units.find(quantity);
+    std::string unit = default_unit;
+    if (stated != col_unit.end()) {
+      if (name_fixes_unit && stated->second != default_unit)
+        throw FormatError(at() + "column '" + column + "' is in " + default_unit + " by its name, not " +
+                          stated->second);
+      unit = stated->second;
+    }
+    if (given != units.end()) {
+      if ((stated != col_unit.end() || name_fixes_unit) && given->second != unit)
+        throw FormatError(at() + "column '" + column + "' is in " + unit + ", but --unit " + quantity + "=" +
+                          given->second + " was given");
+      unit = given->second;
+    }
+    if (unit.empty())
+      throw FormatError(at() + "column '" + column + "' needs its unit: '" + column +
+                        " [s]' (or ms, us, "
+                        "ns), or --unit " +
+                        quantity + "=UNIT");
+    try {
+      return unit_factor(quantity, unit);
+    } catch (const std::invalid_argument& e) {
+      throw FormatError(at() + "column '" + column + "': " + e.what());
+    }
+  }
+};
+
+/// Reads up to and including the header line (comments and empty lines before it skipped); `line_no` counts.
+CsvHeader read_csv_header(std::istream& in, const std::string& path, const UnitOptions& units, int& line_no) {
+  CsvHeader header{path, units, 0, {}, {}};
+  std::string line;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (line.empty() || line[0] == '#') continue;
+    const auto names = split(line);
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      const HeaderCell h = header_cell(names[i]);
+      header.col[h.name] = i;
+      if (!h.unit.empty()) header.col_unit[h.name] = h.unit;
+    }
+    break;
+  }
+  header.line = line_no;
+  return header;
+}
+
+/// The rows read (acc, gyr, mag, quat) into `rec`'s channels, and its nominal rate from the median interval.
+void fill_channels(const std::vector<std::array<double, 13>>& rows, bool has_quat, const std::string& path,
+                   Recording& rec) {
+  const auto n = static_cast<Eigen::Index>(rows.size());
+  if (n < 2) throw FormatError(path + ": fewer than two samples");
+  rec.acc.resize(n, 3);
+  rec.gyr.resize(n, 3);
+  rec.mag.resize(n, 3);
+  if (has_quat) rec.opt_quat.resize(n, 4);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    const auto& r = rows[static_cast<std::size_t>(i)];
+    rec.acc.row(i) << r[0], r[1], r[2];
+    rec.gyr.row(i) << r[3], r[4], r[5];
+    rec.mag.row(i) << r[6], r[7], r[8];
+    if (has_quat) rec.opt_quat.row(i) << r[9], r[10], r[11], r[12];
+  }
+  std::vector<double> dt;
+  for (std::size_t i = 1; i < rec.timestamp_ns.size(); ++i) {
+    dt.push_back(static_cast<double>(rec.timestamp_ns[i]) - static_cast<double>(rec.timestamp_ns[i - 1]));
+  }
+  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
+  const double median_dt = dt[dt.size() / 2];
+  if (!(median_dt > 0.0)) throw FormatError(path + ": timestamps do not increase");
+  rec.sampling_rate_hz = 1e9 / median_dt;
+}
+
 }  // namespace
 
 Recording read_csv(const std::string& path, const UnitOptions& units) {
@@ -89,55 +180,10 @@ Recording read_csv(const std::string& path, const UnitOptions& units) {
 Recording read_csv(std::istream& in, const std::string& path, const UnitOptions& units) {
   std::string line;
   int line_no = 0;
-  std::map<std::string, std::size_t> col;
-  std::map<std::string, std::string> col_unit;  // column -> unit stated in the header
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (line.empty() || line[0] == '#') continue;
-    const auto names = split(line);
-    for (std::size_t i = 0; i < names.size(); ++i) {
-      const HeaderCell h = header_cell(names[i]);
-      col[h.name] = i;
-      if (!h.unit.empty()) col_unit[h.name] = h.unit;
-    }
-    break;
-  }
-  const int header_line = line_no;
+  const CsvHeader header = read_csv_header(in, path, units, line_no);
+  const std::map<std::string, std::size_t>& col = header.col;
   auto at = [&](int l) { return path + ":" + std::to_string(l) + ": "; };
-  auto need = [&](const char* name) {
-    if (!col.contains(name)) throw FormatError(at(header_line) + "missing column '" + name + "'");
-    return col.at(name);
-  };
-  // The factor of a column into bsn's unit: its header's unit, else the --unit given, else the format's default.
-  // A name that fixes the unit (t_s, t_ns) takes no other; a header unit and a different --unit is an error.
-  auto factor = [&](const std::string& column, const std::string& quantity, const std::string& default_unit,
-                    bool name_fixes_unit) {
-    const auto stated = col_unit.find(column);
-    const auto given = units.find(quantity);
-    std::string unit = default_unit;
-    if (stated != col_unit.end()) {
-      if (name_fixes_unit && stated->second != default_unit)
-        throw FormatError(at(header_line) + "column '" + column + "' is in " + default_unit + " by its name, not " +
-                          stated->second);
-      unit = stated->second;
-    }
-    if (given != units.end()) {
-      if ((stated != col_unit.end() || name_fixes_unit) && given->second != unit)
-        throw FormatError(at(header_line) + "column '" + column + "' is in " + unit + ", but --unit " + quantity + "=" +
-                          given->second + " was given");
-      unit = given->second;
-    }
-    if (unit.empty())
-      throw FormatError(at(header_line) + "column '" + column + "' needs its unit: '" + column +
-                        " [s]' (or ms, us, "
-                        "ns), or --unit " +
-                        quantity + "=UNIT");
-    try {
-      return unit_factor(quantity, unit);
-    } catch (const std::invalid_argument& e) {
-      throw FormatError(at(header_line) + "column '" + column + "': " + e.what());
-    }
-  };
+  const int header_line = header.line;
   const char* time_names[] = {"t_ns", "t_s", "t", "time"};
   const char* time_column = nullptr;
   for (const char* t : time_names) {
@@ -149,22 +195,27 @@ Recording read_csv(std::istream& in, const std::string& path, const UnitOptions&
   if (!time_column) throw FormatError(at(header_line) + "missing column 't_s' or 't_ns' (or 't [UNIT]')");
   const std::string tc = time_column;
   const std::size_t c_t = col.at(tc);
-  const double f_t = factor(tc, "time", tc == "t_ns" ? "ns" : tc == "t_s" ? "s" : "", tc == "t_ns" || tc == "t_s");
+  const double f_t = header.factor(tc, "time",
+                                   tc == "t_ns"  ? "ns"
+                                   : tc == "t_s" ? "s"
+                                                 : "",
+                                   tc == "t_ns" || tc == "t_s");
   const bool time_in_ns = f_t == 1.0;
-  const std::size_t c_acc[3] = {need("acc_x"), need("acc_y"), need("acc_z")};
-  const std::size_t c_gyr[3] = {need("gyr_x"), need("gyr_y"), need("gyr_z")};
+  const std::size_t c_acc[3] = {header.need("acc_x"), header.need("acc_y"), header.need("acc_z")};
+  const std::size_t c_gyr[3] = {header.need("gyr_x"), header.need("gyr_y"), header.need("gyr_z")};
   const bool has_mag = col.contains("mag_x");
-  const std::size_t c_mag[3] = {has_mag ? need("mag_x") : 0, has_mag ? need("mag_y") : 0, has_mag ? need("mag_z") : 0};
+  const std::size_t c_mag[3] = {has_mag ? header.need("mag_x") : 0, has_mag ? header.need("mag_y") : 0,
+                                has_mag ? header.need("mag_z") : 0};
   const bool has_quat = col.contains("quat_w");
-  const std::size_t c_q[4] = {has_quat ? need("quat_w") : 0, has_quat ? need("quat_x") : 0,
-                              has_quat ? need("quat_y") : 0, has_quat ? need("quat_z") : 0};
+  const std::size_t c_q[4] = {has_quat ? header.need("quat_w") : 0, has_quat ? header.need("quat_x") : 0,
+                              has_quat ? header.need("quat_y") : 0, has_quat ? header.need("quat_z") : 0};
   const bool has_movement = col.contains("movement");
   double f[9];
   for (int k = 0; k < 3; ++k) {
     const std::string axis(1, static_cast<char>('x' + k));
-    f[k] = factor("acc_" + axis, "acc", "m/s^2", false);
-    f[3 + k] = factor("gyr_" + axis, "gyr", "rad/s", false);
-    f[6 + k] = has_mag ? factor("mag_" + axis, "mag", "uT", false) : 1.0;
+    f[k] = header.factor("acc_" + axis, "acc", "m/s^2", false);
+    f[3 + k] = header.factor("gyr_" + axis, "gyr", "rad/s", false);
+    f[6 + k] = has_mag ? header.factor("mag_" + axis, "mag", "uT", false) : 1.0;
   }
 
   std::vector<std::array<double, 13>> rows;
@@ -203,29 +254,29 @@ Recording read_csv(std::istream& in, const std::string& path, const UnitOptions&
                                           : static_cast<std::uint64_t>(std::llround(t_ns)));
     if (has_movement) rec.movement.push_back(number(col.at("movement"), false) != 0.0 ? 1 : 0);
   }
-  const auto n = static_cast<Eigen::Index>(rows.size());
-  if (n < 2) throw FormatError(path + ": fewer than two samples");
-  rec.acc.resize(n, 3);
-  rec.gyr.resize(n, 3);
-  rec.mag.resize(n, 3);
-  if (has_quat) rec.opt_quat.resize(n, 4);
-  for (Eigen::Index i = 0; i < n; ++i) {
-    const auto& r = rows[static_cast<std::size_t>(i)];
-    rec.acc.row(i) << r[0], r[1], r[2];
-    rec.gyr.row(i) << r[3], r[4], r[5];
-    rec.mag.row(i) << r[6], r[7], r[8];
-    if (has_quat) rec.opt_quat.row(i) << r[9], r[10], r[11], r[12];
-  }
-  std::vector<double> dt;
-  for (std::size_t i = 1; i < rec.timestamp_ns.size(); ++i) {
-    dt.push_back(static_cast<double>(rec.timestamp_ns[i]) - static_cast<double>(rec.timestamp_ns[i - 1]));
-  }
-  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
-  const double median_dt = dt[dt.size() / 2];
-  if (!(median_dt > 0.0)) throw FormatError(path + ": timestamps do not increase");
-  rec.sampling_rate_hz = 1e9 / median_dt;
+  fill_channels(rows, has_quat, path, rec);
   rec.validate(path);
   return rec;
+}
+
+Recording sized_recording(double sampling_rate_hz, Eigen::Index rows) {
+  Recording rec;
+  rec.sampling_rate_hz = sampling_rate_hz;
+  rec.gyr.resize(rows, 3);
+  rec.acc.resize(rows, 3);
+  rec.mag.resize(rows, 3);
+  rec.opt_quat.resize(rows, 4);
+  return rec;
+}
+
+void set_measurement_row(Recording& rec, Eigen::Index row, const fusion::ImuSample& s) {
+  rec.gyr.row(row) = s.gyr.transpose();
+  rec.acc.row(row) = s.acc.transpose();
+  if (s.has_mag) {
+    rec.mag.row(row) = s.mag.transpose();
+  } else {
+    rec.mag.row(row).setConstant(std::numeric_limits<double>::quiet_NaN());
+  }
 }
 
 // ---- Units -------------------------------------------------------------------------------------------------------

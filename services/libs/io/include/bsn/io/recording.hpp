@@ -49,6 +49,12 @@ struct Recording {
   void validate(const std::string& source) const;
 };
 
+/// A recording of `rows` samples at `sampling_rate_hz` with a reference: gyr, acc, mag and opt_quat sized, their
+/// values unset (a simulator's recording, filled row by row with set_measurement_row).
+Recording sized_recording(double sampling_rate_hz, Eigen::Index rows);
+/// Writes sample `s`'s gyroscope, accelerometer and magnetometer into row `row` (no magnetometer: a NaN row).
+void set_measurement_row(Recording& rec, Eigen::Index row, const fusion::ImuSample& s);
+
 /// Reads a BROAD-layout HDF5 file (imu_gyr, imu_acc, imu_mag, optional opt_quat, opt_pos, movement, attribute
 /// sampling_rate), and bsn's optional timestamp_ns (uint64 per sample, written by `bsn export --format broad`).
 Recording read_broad_hdf5(const std::string& path);
