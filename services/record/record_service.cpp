@@ -258,8 +258,10 @@ int run_record(const RecordOptions& opt) {
       if (std::find(topics.begin(), topics.end(), topic.name) == topics.end()) return;
       const std::size_t index = recorder.add_topic(topic.name);
       if (topic.name == dds::kRawTopic.name || topic.name == dds::kOrientationTopic.name) per_segment.push_back(index);
-      readers.push_back(frame.participant().make_reader(
-          topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); }));
+      auto reader = frame.participant().make_reader(
+          topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); });
+      frame.participant().expect_peer(*reader, "writer of a recorded topic");
+      readers.push_back(std::move(reader));
     });
     logging::log_info("recording ", topics.size(), " topics to ", opt.out, " in domain ", opt.domain);
     const bool terminal = isatty(STDERR_FILENO) != 0;
