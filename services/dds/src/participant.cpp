@@ -183,7 +183,8 @@ void add_security(DomainParticipantQos& qos, const std::string& dir) {
   set("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
 }
 
-DomainParticipantQos participant_qos(const std::string& name) {
+// `security_dir`: the identity folder (BSN_SECURITY_DIR when the Participant was made), "" for none.
+DomainParticipantQos participant_qos(const std::string& name, const std::string& security_dir) {
   route_middleware_log();
   // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies; the
   // factory reads the profiles lazily, so load them before asking for the default.
@@ -198,9 +199,8 @@ DomainParticipantQos participant_qos(const std::string& name) {
   DomainParticipantFactory::get_instance()->load_profiles();
   DomainParticipantQos qos = DomainParticipantFactory::get_instance()->get_default_participant_qos();
   qos.name(name);
-  const char* security = std::getenv("BSN_SECURITY_DIR");
-  if (security && *security) {
-    add_security(qos, security);
+  if (!security_dir.empty()) {
+    add_security(qos, security_dir);
     // The participant's name travels in plaintext in discovery (SPDP is not encrypted, even with DDS-Security):
     // no node id or role in it.
     qos.name("bsn");
@@ -274,6 +274,8 @@ struct Participant::Discovery final : DomainParticipantListener {
   };
   std::map<GuidPrefix, Handshake> handshakes;
   std::uint64_t refused = 0;  ///< participants whose authentication failed
+  /// The identity folder, kept for the participant's re-creation (the environment may have changed since).
+  std::string security_dir;
 
   void on_participant_discovery(DomainParticipant*,
                                 eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
@@ -467,7 +469,10 @@ Participant::Participant(const Options& options) : options_(options) {
   }
   secured_ = is_secured();
   subject_ = options.subject;
-  if (secured_) discovery_ = std::make_unique<Discovery>();
+  if (secured_) {
+    discovery_ = std::make_unique<Discovery>();
+    discovery_->security_dir = std::getenv("BSN_SECURITY_DIR");
+  }
   open();
 }
 
@@ -475,7 +480,8 @@ Participant::~Participant() { close(); }
 
 void Participant::open() {
   participant_ = DomainParticipantFactory::get_instance()->create_participant(
-      static_cast<DomainId_t>(options_.domain), participant_qos(options_.name), discovery_.get(), StatusMask::none());
+      static_cast<DomainId_t>(options_.domain),
+      participant_qos(options_.name, discovery_ ? discovery_->security_dir : ""), discovery_.get(), StatusMask::none());
   if (!participant_)
     throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options_.domain));
   // The participant's defaults, not PUBLISHER_QOS_DEFAULT: an XML default profile applies to them.
