@@ -67,10 +67,6 @@ std::uint64_t scenario_start_ns(double start_at_unix_s, std::uint64_t started) {
   return started - std::min(started, static_cast<std::uint64_t>(-ahead_ns));
 }
 
-// How long a secured node waits for a reader before it makes a new participant, and the longest wait after retries.
-constexpr std::uint64_t kJoinBoundNs = 10'000'000'000ull;
-constexpr std::uint64_t kMaxJoinBoundNs = 60'000'000'000ull;
-
 // The true joint angles' message of `segment`'s joint to its parent (none without a parent): names and axes.
 bsn::JointAngles truth_joint(const Body& body, const SegmentDef& def, const std::string& segment) {
   bsn::JointAngles joint;
@@ -100,21 +96,20 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   services::DdsCommandFrame frame(opt.domain, "bsn sim " + opt.node);
   // The joint to the segment's parent, if it has one: its true angles on bsn/truth/joint_angles.
   const SegmentDef& def = body.segment(*body.find(segment));
-  // The writers, on the frame's participant or, after a handshake that never completed, on a new one.
+  dds::Participant& participant = frame.participant();
   struct Outputs {
-    std::unique_ptr<dds::Participant> participant;  ///< null: the frame's
     std::unique_ptr<dds::Writer<bsn::RawSample>> raw;
     std::unique_ptr<dds::Writer<bsn::Orientation>> truth;
     std::unique_ptr<dds::Writer<bsn::Orientation>> segment_truth;
     std::unique_ptr<dds::Writer<bsn::JointAngles>> joint;
   } outputs;
-  auto open_outputs = [&](dds::Participant& p) {
-    outputs.raw = p.make_writer(dds::kRawTopic, std::nullopt, opt.node);
-    outputs.truth = p.make_writer(dds::kTruthOrientationTopic);
-    outputs.segment_truth = p.make_writer(dds::kTruthSegmentOrientationTopic);
-    if (def.parent >= 0) outputs.joint = p.make_writer(dds::kTruthJointAnglesTopic);
-  };
-  open_outputs(frame.participant());
+  outputs.raw = participant.make_writer(dds::kRawTopic, std::nullopt, opt.node);
+  outputs.truth = participant.make_writer(dds::kTruthOrientationTopic);
+  outputs.segment_truth = participant.make_writer(dds::kTruthSegmentOrientationTopic);
+  if (def.parent >= 0) outputs.joint = participant.make_writer(dds::kTruthJointAnglesTopic);
+  // Secured, a raw writer that no fusion matched within dds::kPeerBound_s says so and makes its participant again
+  // (Participant::watch_peers, called below at each sample).
+  participant.expect_peer(*outputs.raw, "reader of bsn/raw for node '" + opt.node + "' (fusion)");
   logging::log_info("publishing segment '", segment, "' of scenario '", spec.name, "' as node '", opt.node, "' at ",
                     spec.rate_hz, " Hz x", opt.speed, " for ", spec.duration_s, " s in domain ", opt.domain,
                     " (raw samples from writer ", dds::writer_name(outputs.raw->guid()), ")");
@@ -125,12 +120,6 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
   truth.node_id(opt.node);
   bsn::Orientation segment_truth = truth;
   bsn::JointAngles joint = truth_joint(body, def, segment);
-  // Fast DDS 2.9.1 sometimes never completes the DDS-Security handshake of two participants, silently: secured, a
-  // raw writer that no reader matched within kJoinBound says so and starts over on a new participant (waiting twice
-  // as long each time, up to a minute).
-  const bool secured = frame.participant().secured();
-  std::uint64_t join_bound_ns = kJoinBoundNs, next_join_check_ns = dds::monotonic_ns() + join_bound_ns;
-  int rejoins = 0;
   std::vector<ScenarioSample> out;
   std::uint64_t write_failures = 0, dropped = 0;
   const std::uint64_t started = dds::monotonic_ns();
@@ -166,18 +155,7 @@ int publish_scenario(const ScenarioSpec& spec, const SimNodeOptions& opt) {
       fill_truth_joint(s, sensor_ns, joint);
       outputs.joint->write(joint);
     }
-    if (secured && dds::monotonic_ns() >= next_join_check_ns) {
-      if (outputs.raw->matched() == 0) {
-        logging::log_error("node '", opt.node, "': no reader of bsn/raw matched in ", join_bound_ns / 1'000'000'000ull,
-                           " s; the DDS-Security handshake with fusion may never have completed (a Fast DDS 2.9.1 ",
-                           "fault) or no fusion runs. Making a new participant (", ++rejoins, ")");
-        outputs = Outputs{};
-        outputs.participant = std::make_unique<dds::Participant>(dds::Participant::Options{opt.domain, "bsn"});
-        open_outputs(*outputs.participant);
-        join_bound_ns = std::min(2 * join_bound_ns, kMaxJoinBoundNs);
-      }
-      next_join_check_ns = dds::monotonic_ns() + join_bound_ns;
-    }
+    participant.watch_peers();
   }
   if (write_failures > 0) logging::log_warn(write_failures, " raw samples could not be written");
   logging::log_info("node '", opt.node, "' stopped (", dropped, " samples dropped by the sensor model)");

@@ -145,6 +145,7 @@ CalibrationService::CalibrationService(dds::Participant& participant, Options op
   // Readers last: their callbacks may fire as soon as they exist.
   raw_reader_ =
       participant_.make_reader(dds::kRawTopic, [this](const bsn::RawSample& raw, const auto&) { on_raw(raw); });
+  participant_.expect_peer(*raw_reader_, "writer of bsn/raw (a sensor node)");
   request_reader_ = participant_.make_reader(dds::kCalibrationRequestTopic,
                                              [this](const bsn::CalibrationRequest& r, const auto&) { on_request(r); });
 }

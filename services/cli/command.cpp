@@ -163,6 +163,7 @@ void add_subject_option(CLI::App* command, std::string& subject) {
 
 int DdsCommandFrame::run_ticks(std::chrono::milliseconds period, const std::function<std::optional<int>()>& tick) {
   while (dds::sleep_unless_shutdown(period)) {
+    participant_.watch_peers();
     if (const std::optional<int> code = tick()) return *code;
   }
   return 0;

@@ -58,8 +58,8 @@ class DdsCommandFrame {
   DdsCommandFrame(int domain, const std::string& participant_name, const std::string& subject = "");
   dds::Participant& participant() { return participant_; }
 
-  /// Calls `tick` every `period` until SIGINT, SIGTERM or dds::request_shutdown (-> 0) or until `tick` returns
-  /// an exit code (-> that code).
+  /// Calls `tick` every `period` (and the participant's watch_peers before it) until SIGINT, SIGTERM or
+  /// dds::request_shutdown (-> 0) or until `tick` returns an exit code (-> that code).
   int run_ticks(std::chrono::milliseconds period, const std::function<std::optional<int>()>& tick);
 
  private:

@@ -110,6 +110,8 @@ std::string format_sample(const bsn::Status& s) {
     out += " unknown_nodes=";
     for (std::size_t i = 0; i < s.unknown_nodes().size(); ++i) out += (i ? "," : "") + text(s.unknown_nodes()[i]);
   }
+  if (s.participant_rejoins())
+    out += printf_string(" participant_rejoins=%llu", static_cast<unsigned long long>(s.participant_rejoins()));
   for (const std::string& other : s.other_fusion_processes()) out += " OTHER_FUSION=" + text(other);
   for (const auto& n : s.nodes()) {
     out +=

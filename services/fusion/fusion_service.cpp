@@ -78,6 +78,7 @@ FusionService::FusionService(dds::Participant& participant, fusion::BodyModel bo
         on_raw(raw, dds::source_id(writer));
       },
       std::nullopt, [this](const bsn::RawSample& raw) { return admit_raw(raw); });
+  participant_.expect_peer(*raw_reader_, "writer of bsn/raw (a sensor node)");
   // Live calibrations (TRANSIENT_LOCAL: the ones published before this start arrive too and override the body
   // file's).
   calibration_reader_ = participant_.make_reader(
@@ -294,6 +295,7 @@ bsn::Status FusionService::make_status(std::uint64_t now) {
   st.dds_rejected_samples(participant_.rejected_samples());
   st.dds_lost_samples(participant_.lost_samples());
   st.other_fusion_processes(other_fusions_);
+  st.participant_rejoins(participant_.rejoins());
   last_status_ns_ = now;
   return st;
 }

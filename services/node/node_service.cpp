@@ -80,8 +80,10 @@ class NodePublisher final : public ReadingSink {
   NodePublisher(dds::Participant& participant, const NodeOptions& opt, io::AxisMap map)
       : opt_(opt),
         map_(map),
+        participant_(participant),
         raw_writer_(participant.make_writer(dds::kRawTopic, std::nullopt, opt.node)),
         status_writer_(participant.make_writer(dds::kStatusTopic)) {
+    participant.expect_peer(*raw_writer_, "reader of bsn/raw for node '" + opt.node + "' (fusion)");
     raw_.node_id(opt.node);
     char host[128] = {};
     gethostname(host, sizeof host - 1);
@@ -129,6 +131,7 @@ class NodePublisher final : public ReadingSink {
   double line_time_scale() const override { return map_.time_scale_s; }
 
   void tick() {
+    participant_.watch_peers();
     const auto now = std::chrono::steady_clock::now();
     if (rejected_since_log_ > 0 && now - last_log_ >= std::chrono::seconds(1)) {
       std::string reasons;
@@ -168,12 +171,14 @@ class NodePublisher final : public ReadingSink {
     }
     st.nodes({n});
     st.write_failures(write_failures_);
+    st.participant_rejoins(participant_.rejoins());
     status_writer_->write(st);
     last_status_ = now;
   }
 
   const NodeOptions& opt_;
   io::AxisMap map_;
+  dds::Participant& participant_;
   std::unique_ptr<dds::Writer<bsn::RawSample>> raw_writer_;
   std::unique_ptr<dds::Writer<bsn::Status>> status_writer_;
   bsn::RawSample raw_;

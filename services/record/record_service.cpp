@@ -234,8 +234,10 @@ void subscribe(dds::Participant& participant, Recorder& recorder, const std::vec
     if (std::find(topics.begin(), topics.end(), topic.name) == topics.end()) return;
     const std::size_t index = recorder.add_topic(topic.name);
     if (topic.name == dds::kRawTopic.name || topic.name == dds::kOrientationTopic.name) per_segment.push_back(index);
-    readers.push_back(participant.make_reader(
-        topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); }));
+    auto reader = participant.make_reader(
+        topic, [&recorder, index](const auto& s, const auto&) { recorder.on_sample<PubSub>(index, s); });
+    participant.expect_peer(*reader, "writer of a recorded topic");
+    readers.push_back(std::move(reader));
   });
 }
 

@@ -115,6 +115,8 @@ int run_view(const ViewOptions& opt) {
       });
   auto status_reader = frame.participant().make_reader(
       dds::kStatusTopic, [&](const bsn::Status& s, const SampleInfo&) { pass_on([&] { return state.on_status(s); }); });
+  frame.participant().expect_peer(*orientation_reader, "writer of bsn/orientation or bsn/status (fusion)");
+  frame.participant().expect_peer(*status_reader, "writer of bsn/orientation or bsn/status (fusion)");
 
   const std::string host = opt.bind == "0.0.0.0" ? "localhost" : opt.bind;
   const std::string query = opt.token.empty() ? "" : "?token=" + opt.token;

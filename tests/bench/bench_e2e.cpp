@@ -1326,7 +1326,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   Bench bench(opt, dir);
   struct Outcome {
-    std::optional<RunResult> latency;
+    std::optional<RunResult> latency, latency_relay;
     int largest = 0;
   };
   // One latency phase and capacity sweep, with their summary; run twice (open, then secured) with --security.
@@ -1543,7 +1543,7 @@ int main(int argc, char** argv) {
             static_cast<double>(r.rss_series.back().second) / static_cast<double>(r.n));
       }
     }
-    return Outcome{latency, largest};
+    return Outcome{latency, latency_relay, largest};
   };
   const Outcome open = measure(opt.security.empty() ? "" : " (DDS-Security off)");
   if (!opt.security.empty() && !bsn::dds::shutdown_requested()) {
@@ -1559,6 +1559,23 @@ int main(int argc, char** argv) {
     if (open.largest > 0) {
       std::printf("capacity: %d segments on, %d off: %.0f %%\n", secured.largest, open.largest,
                   100.0 * secured.largest / open.largest);
+    }
+    // What DDS-Security costs the bare relay is Fast DDS's own security layer (the same participant, topics and QoS,
+    // one orientation out per raw sample in); what it costs the fusion beyond that is bsn's own secured overhead.
+    if (open.latency && secured.latency && open.latency_relay && secured.latency_relay) {
+      const RunResult &fusion_off = *open.latency, &fusion_on = *secured.latency, &relay_off = *open.latency_relay,
+                      &relay_on = *secured.latency_relay;
+      auto overhead = [&](const char* what, double relay, double fusion) {
+        std::printf("  %s: relay %s us (Fast DDS's own layer), fusion %s us: fusion / relay %s x (target <= 1.2)\n",
+                    what, fmt("%.1f", relay).c_str(), fmt("%.1f", fusion).c_str(), ratio(fusion, relay).c_str());
+      };
+      std::printf("secured overhead (on - off), %d segments:\n", opt.latency_segments);
+      overhead("median latency", relay_on.latency.p50_us - relay_off.latency.p50_us,
+               fusion_on.latency.p50_us - fusion_off.latency.p50_us);
+      overhead("p99 latency", relay_on.latency.p99_us - relay_off.latency.p99_us,
+               fusion_on.latency.p99_us - fusion_off.latency.p99_us);
+      overhead("CPU per sample", relay_on.us_per_sample() - relay_off.us_per_sample(),
+               fusion_on.us_per_sample() - fusion_off.us_per_sample());
     }
   }
   const double total_s = std::chrono::duration<double>(Clock::now() - started).count();

@@ -18,6 +18,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "bsn/dds/conversions.hpp"
 #include "bsn/logging/log.hpp"
 
 namespace bsn::dds {
@@ -151,6 +152,9 @@ void route_middleware_log() {
   std::call_once(routed, [] {
     Log::ClearConsumers();
     Log::RegisterConsumer(std::make_unique<MiddlewareLog>());
+    // Fast DDS logs only its errors by default; its warnings (e.g. of the security handshake) on request.
+    if (const char* level = std::getenv("BSN_DDS_LOG"); level && std::strcmp(level, "warning") == 0)
+      Log::SetVerbosity(Log::Warning);
   });
 }
 
@@ -179,7 +183,8 @@ void add_security(DomainParticipantQos& qos, const std::string& dir) {
   set("dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC");
 }
 
-DomainParticipantQos participant_qos(const std::string& name) {
+// `security_dir`: the identity folder (BSN_SECURITY_DIR when the Participant was made), "" for none.
+DomainParticipantQos participant_qos(const std::string& name, const std::string& security_dir) {
   route_middleware_log();
   // Start from the factory default so an XML profile (FASTRTPS_DEFAULT_PROFILES_FILE) still applies; the
   // factory reads the profiles lazily, so load them before asking for the default.
@@ -194,9 +199,8 @@ DomainParticipantQos participant_qos(const std::string& name) {
   DomainParticipantFactory::get_instance()->load_profiles();
   DomainParticipantQos qos = DomainParticipantFactory::get_instance()->get_default_participant_qos();
   qos.name(name);
-  const char* security = std::getenv("BSN_SECURITY_DIR");
-  if (security && *security) {
-    add_security(qos, security);
+  if (!security_dir.empty()) {
+    add_security(qos, security_dir);
     // The participant's name travels in plaintext in discovery (SPDP is not encrypted, even with DDS-Security):
     // no node id or role in it.
     qos.name("bsn");
@@ -258,10 +262,42 @@ void make_exclusive(OwnershipQosPolicy& ownership, LivelinessQosPolicy& liveline
 bool is_per_subject(const std::string& topic) { return is_owned_estimate(topic) || topic == kStatusTopic.name; }
 
 // Remembers the partitions each discovered bsn/raw writer had when it was first discovered (before Fast DDS pairs
-// it with a reader: PDP::addWriterProxyData calls the listener first).
+// it with a reader: PDP::addWriterProxyData calls the listener first), and which discovered participants have not
+// finished their authentication handshake with this one: the evidence watch_peers names.
 struct Participant::Discovery final : DomainParticipantListener {
+  using GuidPrefix = eprosima::fastrtps::rtps::GuidPrefix_t;
   mutable std::mutex mutex;
   std::map<eprosima::fastrtps::rtps::GUID_t, std::vector<std::string>> partitions;
+  struct Handshake {
+    std::uint64_t discovered_ns = 0;
+    bool authorised = false;
+  };
+  std::map<GuidPrefix, Handshake> handshakes;
+  std::uint64_t refused = 0;  ///< participants whose authentication failed
+  /// The identity folder, kept for the participant's re-creation (the environment may have changed since).
+  std::string security_dir;
+
+  void on_participant_discovery(DomainParticipant*,
+                                eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
+    using Info = eprosima::fastrtps::rtps::ParticipantDiscoveryInfo;
+    std::lock_guard lock(mutex);
+    const GuidPrefix& prefix = info.info.m_guid.guidPrefix;
+    if (info.status == Info::DISCOVERED_PARTICIPANT)
+      handshakes.try_emplace(prefix, Handshake{monotonic_ns(), false});
+    else if (info.status == Info::REMOVED_PARTICIPANT || info.status == Info::DROPPED_PARTICIPANT)
+      handshakes.erase(prefix);
+  }
+  void onParticipantAuthentication(DomainParticipant*,
+                                   eprosima::fastrtps::rtps::ParticipantAuthenticationInfo&& info) override {
+    using Info = eprosima::fastrtps::rtps::ParticipantAuthenticationInfo;
+    std::lock_guard lock(mutex);
+    if (info.status == Info::AUTHORIZED_PARTICIPANT) {
+      handshakes.try_emplace(info.guid.guidPrefix, Handshake{monotonic_ns(), false}).first->second.authorised = true;
+    } else {
+      ++refused;
+      handshakes.erase(info.guid.guidPrefix);
+    }
+  }
   void on_publisher_discovery(DomainParticipant*, eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override {
     using Info = eprosima::fastrtps::rtps::WriterDiscoveryInfo;
     if (!is_per_node(info.info.topicName().to_string())) return;
@@ -270,6 +306,31 @@ struct Participant::Discovery final : DomainParticipantListener {
       partitions.try_emplace(info.info.guid(), info.info.m_qos.m_partition.getNames());
     else if (info.status == Info::REMOVED_WRITER)
       partitions.erase(info.info.guid());
+  }
+  /// "N discovered participant(s) without a finished handshake (GUID prefixes ...), M refused".
+  std::string unfinished_handshakes(std::uint64_t older_than_ns) const {
+    std::lock_guard lock(mutex);
+    const std::uint64_t now = monotonic_ns();
+    std::ostringstream out;
+    std::size_t n = 0, authorised = 0;
+    for (const auto& [prefix, h] : handshakes) {
+      if (h.authorised) {
+        ++authorised;
+        continue;
+      }
+      if (now - h.discovered_ns < older_than_ns) continue;
+      out << (n++ == 0 ? " " : ", ") << prefix;
+    }
+    std::ostringstream text;
+    text << authorised << " participant(s) authenticated, " << n << " discovered " << older_than_ns / 1'000'000'000ull
+         << "+ s ago without a finished handshake" << (n > 0 ? ":" : "") << out.str();
+    if (refused > 0) text << ", " << refused << " refused";
+    return text.str();
+  }
+  void clear() {
+    std::lock_guard lock(mutex);
+    partitions.clear();
+    handshakes.clear();
   }
 };
 
@@ -311,23 +372,24 @@ struct Participant::AdmissionFilters final : IContentFilterFactory {
   ReturnCode_t delete_content_filter(const char*, IContentFilter*) override { return ReturnCode_t::RETCODE_OK; }
 };
 
-TopicDescription* Participant::admitting_topic(eprosima::fastdds::dds::Topic* topic, PayloadAdmission admit) {
+std::size_t Participant::add_admission(PayloadAdmission admit) {
   std::lock_guard lock(mutex_);
-  if (!admission_) {
-    admission_ = std::make_unique<AdmissionFilters>();
+  if (!admission_) admission_ = std::make_unique<AdmissionFilters>();
+  std::lock_guard filters_lock(admission_->mutex);
+  admission_->filters.push_back(std::make_unique<AdmissionFilters::Filter>());
+  admission_->filters.back()->admit = std::move(admit);
+  return admission_->filters.size() - 1;
+}
+
+TopicDescription* Participant::admitting_topic(eprosima::fastdds::dds::Topic* topic, std::size_t index) {
+  std::lock_guard lock(mutex_);
+  if (admission_->class_name.empty()) {  // the first admitting reader of this DDS participant
     std::ostringstream name;
     name << "bsn_admission_" << participant_->guid().guidPrefix;
     admission_->class_name = name.str();
     if (participant_->register_content_filter_factory(admission_->class_name.c_str(), admission_.get()) !=
         ReturnCode_t::RETCODE_OK)
       throw std::runtime_error("cannot register the admission filter of topic " + topic->get_name());
-  }
-  std::size_t index = 0;
-  {
-    std::lock_guard filters_lock(admission_->mutex);
-    index = admission_->filters.size();
-    admission_->filters.push_back(std::make_unique<AdmissionFilters::Filter>());
-    admission_->filters.back()->admit = std::move(admit);
   }
   ContentFilteredTopic* filtered =
       participant_->create_contentfilteredtopic(topic->get_name() + "#admission" + std::to_string(index), topic,
@@ -401,39 +463,72 @@ int default_domain() {
   return 0;
 }
 
-Participant::Participant(const Options& options) {
+Participant::Participant(const Options& options) : options_(options) {
   if (options.domain < 0 || options.domain > 232) {
     throw std::runtime_error("DDS domain id " + std::to_string(options.domain) + " is outside 0..232");
   }
   secured_ = is_secured();
   subject_ = options.subject;
-  if (secured_) discovery_ = std::make_unique<Discovery>();
+  if (secured_) {
+    discovery_ = std::make_unique<Discovery>();
+    discovery_->security_dir = std::getenv("BSN_SECURITY_DIR");
+  }
+  open();
+}
+
+Participant::~Participant() { close(); }
+
+void Participant::open() {
   participant_ = DomainParticipantFactory::get_instance()->create_participant(
-      static_cast<DomainId_t>(options.domain), participant_qos(options.name), discovery_.get(), StatusMask::none());
+      static_cast<DomainId_t>(options_.domain),
+      participant_qos(options_.name, discovery_ ? discovery_->security_dir : ""), discovery_.get(), StatusMask::none());
   if (!participant_)
-    throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options.domain));
+    throw std::runtime_error("cannot create a DDS participant in domain " + std::to_string(options_.domain));
   // The participant's defaults, not PUBLISHER_QOS_DEFAULT: an XML default profile applies to them.
   publisher_ = participant_->create_publisher(participant_->get_default_publisher_qos());
   subscriber_ = participant_->create_subscriber(participant_->get_default_subscriber_qos());
   if (!publisher_ || !subscriber_) throw std::runtime_error("cannot create a DDS publisher or subscriber");
 }
 
-Participant::~Participant() {
+void Participant::close() {
   if (!participant_) return;
   // Stop callbacks before the listeners they call are destroyed.
   for (DataReader* r : readers_) r->set_listener(nullptr);
+  participant_->set_listener(nullptr);
   participant_->delete_contained_entities();
   DomainParticipantFactory::get_instance()->delete_participant(participant_);
+  participant_ = nullptr;
+  publisher_ = nullptr;
+  subscriber_ = nullptr;
+  std::lock_guard lock(mutex_);
+  topics_.clear();
+  partition_publishers_.clear();
+  partition_subscribers_.clear();
+  any_partition_subscriber_ = nullptr;
+  readers_.clear();
+  writer_listeners_.clear();
+  reader_listeners_.clear();
+  if (admission_) admission_->class_name.clear();
 }
 
 eprosima::fastdds::dds::Topic* Participant::find_or_create_topic(const std::string& name, TypeSupport type) {
   std::lock_guard lock(mutex_);
   if (auto it = topics_.find(name); it != topics_.end()) return it->second;
+  types_.try_emplace(name, type);
   if (participant_->find_type(type.get_type_name()) == nullptr) type.register_type(participant_);
   eprosima::fastdds::dds::Topic* t = participant_->create_topic(name, type.get_type_name(), TOPIC_QOS_DEFAULT);
   if (!t) throw std::runtime_error("cannot create DDS topic " + name);
   topics_[name] = t;
   return t;
+}
+
+eprosima::fastdds::dds::Topic* Participant::topic_named(const std::string& name) {
+  TypeSupport type;
+  {
+    std::lock_guard lock(mutex_);
+    type = types_.at(name);
+  }
+  return find_or_create_topic(name, type);
 }
 
 Subscriber* Participant::subscriber_in(const std::string& partition) {
@@ -458,9 +553,12 @@ Publisher* Participant::publisher_in(const std::string& partition) {
 
 // Writers and readers start from their publisher's or subscriber's default QoS (the XML default profile, if
 // any) with bsn's delivery of the topic on top; a profile named after the topic replaces both.
-DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
-                                       std::shared_ptr<EndpointEvents> events, const std::string& node,
-                                       const WriterScope& scope) {
+DataWriter* Participant::create_writer(const WriterRecipe& recipe) {
+  eprosima::fastdds::dds::Topic* topic = topic_named(recipe.topic);
+  const TopicQos& delivery = recipe.delivery;
+  const std::string& node = recipe.node;
+  const WriterScope& scope = recipe.scope;
+  const std::shared_ptr<EndpointEvents>& events = recipe.events;
   Publisher* publisher = publisher_;
   const std::string subject = scope.subject.value_or(subject_);
   if (secured_ && is_per_node(topic->get_name())) {
@@ -492,11 +590,13 @@ DataWriter* Participant::create_writer(eprosima::fastdds::dds::Topic* topic, Top
   return w;
 }
 
-void Participant::create_reader(eprosima::fastdds::dds::TopicDescription* topic, TopicQos delivery,
-                                std::shared_ptr<EndpointEvents> events, const std::optional<std::string>& subject) {
-  // A filtered topic's delivery and profile are its source topic's.
-  const auto* filtered = dynamic_cast<ContentFilteredTopic*>(topic);
-  const std::string name = filtered != nullptr ? filtered->get_related_topic()->get_name() : topic->get_name();
+void Participant::create_reader(const ReaderRecipe& recipe) {
+  eprosima::fastdds::dds::Topic* source = topic_named(recipe.topic);
+  TopicDescription* topic = recipe.admission ? admitting_topic(source, *recipe.admission) : source;
+  const std::string& name = recipe.topic;
+  const TopicQos& delivery = recipe.delivery;
+  const std::optional<std::string>& subject = recipe.subject;
+  const std::shared_ptr<EndpointEvents>& events = recipe.events;
   Subscriber* subscriber = subscriber_;
   const std::string partition = subject.value_or(subject_);
   if (secured_ && is_per_node(name)) {
@@ -535,6 +635,127 @@ void Participant::create_one_reader(Subscriber* subscriber, TopicDescription* to
   std::lock_guard lock(mutex_);
   reader_listeners_.push_back(std::move(listener));
   readers_.push_back(r);
+}
+
+}  // namespace bsn::dds
+
+namespace bsn::dds {
+
+std::shared_ptr<EndpointHandle> Participant::add_writer(const std::string& topic, TopicQos delivery,
+                                                        std::shared_ptr<EndpointEvents> events, const std::string& node,
+                                                        const WriterScope& scope) {
+  std::lock_guard lock(endpoints_mutex_);
+  auto handle = std::make_shared<EndpointHandle>();
+  handle->guard = &writer_guard_;
+  WriterRecipe recipe{handle, std::move(events), topic, delivery, node, scope};
+  handle->writer = create_writer(recipe);
+  writer_recipes_.push_back(std::move(recipe));
+  return handle;
+}
+
+std::shared_ptr<EndpointHandle> Participant::add_reader(const std::string& topic, std::optional<std::size_t> admission,
+                                                        TopicQos delivery, std::shared_ptr<EndpointEvents> events,
+                                                        const std::optional<std::string>& subject) {
+  std::lock_guard lock(endpoints_mutex_);
+  auto handle = std::make_shared<EndpointHandle>();
+  handle->guard = &writer_guard_;
+  ReaderRecipe recipe{handle, std::move(events), topic, admission, delivery, subject};
+  create_reader(recipe);
+  reader_recipes_.push_back(std::move(recipe));
+  return handle;
+}
+
+bool Participant::writer_is_volatile(const EndpointHandle& handle) {
+  return handle.writer.load()->get_qos().durability().kind == VOLATILE_DURABILITY_QOS;
+}
+
+void Participant::expect(const std::shared_ptr<EndpointEvents>& events, const std::string& peer) {
+  if (!secured_) return;
+  std::lock_guard lock(endpoints_mutex_);
+  auto it = std::find_if(expectations_.begin(), expectations_.end(), [&](const auto& e) { return e.peer == peer; });
+  if (it == expectations_.end()) it = expectations_.insert(expectations_.end(), Expectation{peer, {}, monotonic_ns()});
+  it->endpoints.push_back(events);
+}
+
+bool Participant::watch_peers() {
+  if (!secured_) return false;
+  std::unique_lock lock(endpoints_mutex_);
+  const std::uint64_t now = monotonic_ns();
+  if (peer_bound_ns_ == 0) peer_bound_ns_ = static_cast<std::uint64_t>(kPeerBound_s * 1e9);
+  const Expectation* unmet = nullptr;
+  bool all_met = true;
+  for (Expectation& e : expectations_) {
+    bool matched = false, live = false;
+    for (const auto& weak : e.endpoints) {
+      if (const auto ev = weak.lock()) {
+        live = true;
+        matched = matched || ev->matched.load() > 0 || ev->matched_exclusive.load() > 0;
+      }
+    }
+    if (!live || matched) {
+      e.unmatched_since_ns = now;
+      continue;
+    }
+    all_met = false;
+    if (now - e.unmatched_since_ns >= peer_bound_ns_ && unmet == nullptr) unmet = &e;
+  }
+  if (all_met) peer_bound_ns_ = static_cast<std::uint64_t>(kPeerBound_s * 1e9);
+  if (unmet == nullptr) return false;
+  const std::uint64_t rejoin = ++rejoins_;
+  logging::log_error("no ", unmet->peer, " matched in ", peer_bound_ns_ / 1'000'000'000ull, " s (",
+                     discovery_->unfinished_handshakes(peer_bound_ns_ / 2),
+                     "): none runs, or a DDS-Security handshake never completed (a Fast DDS 2.9.1 fault). Making a ",
+                     "new participant (", rejoin, "; counted on bsn/status as participant_rejoins)");
+  recreate();
+  peer_bound_ns_ = std::min(2 * peer_bound_ns_, static_cast<std::uint64_t>(kMaxPeerBound_s * 1e9));
+  for (Expectation& e : expectations_) e.unmatched_since_ns = monotonic_ns();
+  return true;
+}
+
+void Participant::recreate() {
+  std::lock_guard lock(endpoints_mutex_);
+  {
+    // No write uses a DataWriter of the old participant once this block ends.
+    std::unique_lock guard(writer_guard_);
+    for (const WriterRecipe& r : writer_recipes_)
+      if (const auto h = r.handle.lock()) h->writer = nullptr;
+  }
+  std::ostringstream was;
+  was << participant_->guid().guidPrefix;
+  close();
+  discovery_->clear();
+  auto forget = [](EndpointEvents& ev) {
+    ev.matched = 0;
+    ev.matched_exclusive = 0;
+    ev.alive_writers = 0;
+    ev.alive_writers_exclusive = 0;
+    std::lock_guard callback_lock(ev.callback_mutex);
+    // The remote writers keep their sequence numbers; what they wrote while unmatched was never this reader's.
+    ev.last_sequence.clear();
+    ev.last_writer_sequence = nullptr;
+    ev.owner_of_instance.clear();
+  };
+  open();
+  std::erase_if(writer_recipes_, [](const WriterRecipe& r) { return r.handle.expired(); });
+  std::erase_if(reader_recipes_, [](const ReaderRecipe& r) { return r.handle.expired(); });
+  std::vector<DataWriter*> writers;
+  for (const WriterRecipe& r : writer_recipes_) {
+    forget(*r.events);
+    writers.push_back(create_writer(r));
+  }
+  for (const ReaderRecipe& r : reader_recipes_) {
+    forget(*r.events);
+    create_reader(r);
+  }
+  {
+    std::unique_lock guard(writer_guard_);
+    for (std::size_t i = 0; i < writer_recipes_.size(); ++i)
+      if (const auto h = writer_recipes_[i].handle.lock()) h->writer = writers[i];
+  }
+  std::ostringstream is;
+  is << participant_->guid().guidPrefix;
+  logging::log_info("the new DDS participant is ", is.str(), " (was ", was.str(), "), with ", writer_recipes_.size(),
+                    " writer(s) and ", reader_recipes_.size(), " reader(s)");
 }
 
 }  // namespace bsn::dds

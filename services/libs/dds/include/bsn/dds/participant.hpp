@@ -19,6 +19,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <shared_mutex>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -76,29 +77,49 @@ bool new_instant_for_owner(EndpointEvents& events, const eprosima::fastdds::dds:
 void count_lost(EndpointEvents& events, const eprosima::fastdds::dds::SampleInfo& info,
                 const eprosima::fastdds::dds::DataReader* reader);
 
-/// A typed writer. Valid while its Participant lives.
+/// What ties an endpoint to its participant's re-creations (Participant::watch_peers): the participant makes again
+/// only the endpoints whose handle still lives, and swaps a writer's DataWriter under the participant's guard.
+struct EndpointHandle {
+  /// A writer's current DataWriter; null while the participant is being made again (a write then fails).
+  std::atomic<eprosima::fastdds::dds::DataWriter*> writer{nullptr};
+  /// The participant's: held shared around each use of `writer`, exclusively to swap it.
+  std::shared_mutex* guard = nullptr;
+};
+
+/// A typed writer. Valid while its Participant lives; it survives the participant's re-creation.
 template <class T>
 class Writer {
  public:
-  Writer(eprosima::fastdds::dds::DataWriter* w, std::shared_ptr<EndpointEvents> ev)
-      : writer_(w),
-        events_(std::move(ev)),
-        volatile_(w->get_qos().durability().kind == eprosima::fastdds::dds::VOLATILE_DURABILITY_QOS) {}
+  Writer(std::shared_ptr<EndpointHandle> handle, std::shared_ptr<EndpointEvents> ev, bool is_volatile)
+      : handle_(std::move(handle)), events_(std::move(ev)), volatile_(is_volatile) {}
   /// Returns false if DDS refused the sample (it is then lost and the caller should count it).
-  bool write(const T& sample) { return writer_->write(const_cast<T*>(&sample)); }
+  bool write(const T& sample) {
+    std::shared_lock lock(*handle_->guard);
+    eprosima::fastdds::dds::DataWriter* w = handle_->writer.load(std::memory_order_relaxed);
+    return w != nullptr && w->write(const_cast<T*>(&sample));
+  }
   /// Readers currently matched.
   int matched() const { return events_->matched.load(); }
   /// True if a sample written now could reach no reader, ever: no reader is matched and the writer keeps nothing
   /// for later ones (VOLATILE; an XML profile may make it otherwise). Such a write may be skipped.
   bool unheard() const { return volatile_ && matched() == 0; }
-  /// The writer's GUID: what readers see as the sample's writer (SampleInfo::sample_identity.writer_guid()).
-  eprosima::fastrtps::rtps::GUID_t guid() const { return writer_->guid(); }
+  /// The writer's GUID: what readers see as the sample's writer (SampleInfo::sample_identity.writer_guid()). It
+  /// changes when the participant is made again.
+  eprosima::fastrtps::rtps::GUID_t guid() const {
+    std::shared_lock lock(*handle_->guard);
+    eprosima::fastdds::dds::DataWriter* w = handle_->writer.load(std::memory_order_relaxed);
+    return w != nullptr ? w->guid() : eprosima::fastrtps::rtps::GUID_t::unknown();
+  }
   /// An owned estimate writer (WriterScope::ownership_strength) is alive while it writes or asserts this at least
   /// once per kOwnedEstimateLease_s.
-  void assert_liveliness() { writer_->assert_liveliness(); }
+  void assert_liveliness() {
+    std::shared_lock lock(*handle_->guard);
+    if (eprosima::fastdds::dds::DataWriter* w = handle_->writer.load(std::memory_order_relaxed)) w->assert_liveliness();
+  }
+  const std::shared_ptr<EndpointEvents>& events() const { return events_; }
 
  private:
-  eprosima::fastdds::dds::DataWriter* writer_;
+  std::shared_ptr<EndpointHandle> handle_;
   std::shared_ptr<EndpointEvents> events_;
   bool volatile_;
 };
@@ -108,7 +129,8 @@ class Writer {
 template <class T>
 class Reader {
  public:
-  explicit Reader(std::shared_ptr<EndpointEvents> ev) : events_(std::move(ev)) {}
+  Reader(std::shared_ptr<EndpointHandle> handle, std::shared_ptr<EndpointEvents> ev)
+      : handle_(std::move(handle)), events_(std::move(ev)) {}
   ~Reader() {
     std::lock_guard lock(events_->callback_mutex);
     events_->on_data = nullptr;
@@ -119,8 +141,10 @@ class Reader {
   /// Matched writers whose liveliness holds, and how often one lost it (its process died or hangs).
   int alive_writers() const { return events_->alive_writers.load() + events_->alive_writers_exclusive.load(); }
   std::uint64_t writers_lost() const { return events_->writers_lost.load(); }
+  const std::shared_ptr<EndpointEvents>& events() const { return events_; }
 
  private:
+  std::shared_ptr<EndpointHandle> handle_;
   std::shared_ptr<EndpointEvents> events_;
 };
 
@@ -172,9 +196,11 @@ class Participant {
                                                              std::optional<TopicQos> delivery = {},
                                                              const std::string& node = "",
                                                              const WriterScope& scope = {}) {
+    std::lock_guard lock(endpoints_mutex_);  // not while the participant is made again
     auto events = std::make_shared<EndpointEvents>();
-    auto* w = create_writer(dds_topic<PubSub>(topic.name), delivery.value_or(topic.qos), events, node, scope);
-    return std::make_unique<Writer<typename PubSub::type>>(w, events);
+    dds_topic<PubSub>(topic.name);
+    auto handle = add_writer(topic.name, delivery.value_or(topic.qos), events, node, scope);
+    return std::make_unique<Writer<typename PubSub::type>>(handle, events, writer_is_volatile(*handle));
   }
 
   /// Decides whether a sample may enter a reader. Fast DDS asks it on its receive thread for every sample before
@@ -196,6 +222,7 @@ class Participant {
       std::function<void(const typename PubSub::type&, const eprosima::fastdds::dds::SampleInfo&)> on_sample,
       std::optional<TopicQos> delivery = {}, Admission<typename PubSub::type> admit = {},
       const std::optional<std::string>& subject = {}) {
+    std::lock_guard lock(endpoints_mutex_);  // not while the participant is made again
     auto events = std::make_shared<EndpointEvents>();
     // One sample object for the reader's life (on_data runs under the callback mutex): its strings and sequences
     // keep their storage from one sample to the next.
@@ -216,20 +243,38 @@ class Participant {
         cb(sample, info);
       }
     };
-    eprosima::fastdds::dds::TopicDescription* source = dds_topic<PubSub>(topic.name);
+    dds_topic<PubSub>(topic.name);
+    std::optional<std::size_t> admission;
     if (admit) {
-      source = admitting_topic(static_cast<eprosima::fastdds::dds::Topic*>(source),
-                               [admit = std::move(admit)](const eprosima::fastrtps::rtps::SerializedPayload_t& bytes) {
-                                 thread_local typename PubSub::type sample;
-                                 thread_local Guarded<PubSub> type;
-                                 auto* payload = const_cast<eprosima::fastrtps::rtps::SerializedPayload_t*>(&bytes);
-                                 if (!type.deserialize(payload, &sample) || last_deserialize_failed()) return true;
-                                 return admit(sample);
-                               });
+      admission = add_admission([admit = std::move(admit)](const eprosima::fastrtps::rtps::SerializedPayload_t& bytes) {
+        thread_local typename PubSub::type sample;
+        thread_local Guarded<PubSub> type;
+        auto* payload = const_cast<eprosima::fastrtps::rtps::SerializedPayload_t*>(&bytes);
+        if (!type.deserialize(payload, &sample) || last_deserialize_failed()) return true;
+        return admit(sample);
+      });
     }
-    create_reader(source, delivery.value_or(topic.qos), events, subject);
-    return std::make_unique<Reader<typename PubSub::type>>(events);
+    auto handle = add_reader(topic.name, admission, delivery.value_or(topic.qos), events, subject);
+    return std::make_unique<Reader<typename PubSub::type>>(handle, events);
   }
+
+  /// Under DDS-Security, says that `endpoint` (a Writer or Reader of this participant) needs a peer, named by
+  /// `peer` ("a fusion reading bsn/raw"). Endpoints given the same `peer` are one expectation, met while any of them
+  /// is matched. On an open network it does nothing.
+  template <class Endpoint>
+  void expect_peer(const Endpoint& endpoint, const std::string& peer) {
+    expect(endpoint.events(), peer);
+  }
+
+  /// Fast DDS 2.9.1 sometimes never completes the DDS-Security handshake of two participants and never tries
+  /// again while both live (docs/deployment.md, DDS-Security). Under DDS-Security, if an expectation (expect_peer)
+  /// has had no match for kPeerBound_s (doubling after each try, up to kMaxPeerBound_s), this logs an error naming
+  /// the peer and the handshakes still unfinished, counts it (rejoins()) and makes the participant again, with a new
+  /// GUID and every endpoint whose Writer or Reader still lives: a fresh handshake with everyone. Call it from one
+  /// thread, periodically (DdsCommandFrame::run_ticks does); not from a DDS callback. True if it made it again.
+  bool watch_peers();
+  /// Times watch_peers made the participant again (bsn/status participant_rejoins).
+  std::uint64_t rejoins() const { return rejoins_.load(); }
 
   /// Incompatible-QoS events seen by any endpoint of this participant.
   std::uint64_t qos_mismatches() const { return qos_mismatches_.load(); }
@@ -242,6 +287,7 @@ class Participant {
   /// 2.9.1 does not report the max_instances case).
   std::uint64_t rejected_samples() const { return rejected_samples_.load(); }
 
+  /// The current DDS participant: another one after watch_peers made it again.
   eprosima::fastdds::dds::DomainParticipant* native() { return participant_; }
 
   /// True if the participant runs with DDS-Security (BSN_SECURITY_DIR).
@@ -258,29 +304,61 @@ class Participant {
     return find_or_create_topic(name, type);
   }
 
+  /// The DDS participant with its default publisher and subscriber.
+  void open();
+  /// Deletes the DDS participant and every entity in it.
+  void close();
   eprosima::fastdds::dds::Topic* find_or_create_topic(const std::string& name,
                                                       eprosima::fastdds::dds::TypeSupport type);
+  /// The topic of that name on the current participant; its type was given the first time (dds_topic).
+  eprosima::fastdds::dds::Topic* topic_named(const std::string& name);
   using PayloadAdmission = std::function<bool(const eprosima::fastrtps::rtps::SerializedPayload_t&)>;
-  /// A content-filtered view of `topic` whose filter is `admit` (AdmissionFilters in participant.cpp).
-  eprosima::fastdds::dds::TopicDescription* admitting_topic(eprosima::fastdds::dds::Topic* topic,
-                                                            PayloadAdmission admit);
-  eprosima::fastdds::dds::DataWriter* create_writer(eprosima::fastdds::dds::Topic* topic, TopicQos delivery,
-                                                    std::shared_ptr<EndpointEvents> events, const std::string& node,
-                                                    const WriterScope& scope);
+  /// The index of a new admission (AdmissionFilters in participant.cpp).
+  std::size_t add_admission(PayloadAdmission admit);
+  /// A content-filtered view of `topic` whose filter is admission `index`.
+  eprosima::fastdds::dds::TopicDescription* admitting_topic(eprosima::fastdds::dds::Topic* topic, std::size_t index);
+  /// What a writer or reader is made of, kept to make it again on a new participant.
+  struct WriterRecipe {
+    std::weak_ptr<EndpointHandle> handle;
+    std::shared_ptr<EndpointEvents> events;
+    std::string topic;
+    TopicQos delivery;
+    std::string node;
+    WriterScope scope;
+  };
+  struct ReaderRecipe {
+    std::weak_ptr<EndpointHandle> handle;
+    std::shared_ptr<EndpointEvents> events;
+    std::string topic;
+    std::optional<std::size_t> admission;
+    TopicQos delivery;
+    std::optional<std::string> subject;
+  };
+  std::shared_ptr<EndpointHandle> add_writer(const std::string& topic, TopicQos delivery,
+                                             std::shared_ptr<EndpointEvents> events, const std::string& node,
+                                             const WriterScope& scope);
+  std::shared_ptr<EndpointHandle> add_reader(const std::string& topic, std::optional<std::size_t> admission,
+                                             TopicQos delivery, std::shared_ptr<EndpointEvents> events,
+                                             const std::optional<std::string>& subject);
+  static bool writer_is_volatile(const EndpointHandle& handle);
+  eprosima::fastdds::dds::DataWriter* create_writer(const WriterRecipe& recipe);
+  void create_reader(const ReaderRecipe& recipe);
   eprosima::fastdds::dds::Publisher* publisher_in(const std::string& partition);    ///< under mutex_
   eprosima::fastdds::dds::Subscriber* subscriber_in(const std::string& partition);  ///< under mutex_
-  /// The reader (and for an estimate topic its EXCLUSIVE twin) on `topic`.
-  void create_reader(eprosima::fastdds::dds::TopicDescription* topic, TopicQos delivery,
-                     std::shared_ptr<EndpointEvents> events, const std::optional<std::string>& subject);
   void create_one_reader(eprosima::fastdds::dds::Subscriber* subscriber,
                          eprosima::fastdds::dds::TopicDescription* topic, const std::string& name, TopicQos delivery,
                          std::shared_ptr<EndpointEvents> events, bool exclusive);
+  void expect(const std::shared_ptr<EndpointEvents>& events, const std::string& peer);
+  /// Makes the participant again with every live endpoint (watch_peers).
+  void recreate();
 
+  Options options_;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
   std::mutex mutex_;
   std::map<std::string, eprosima::fastdds::dds::Topic*> topics_;
+  std::map<std::string, eprosima::fastdds::dds::TypeSupport> types_;  ///< per topic name, to make the topic again
   std::vector<std::unique_ptr<eprosima::fastdds::dds::DataWriterListener>> writer_listeners_;
   std::vector<std::unique_ptr<eprosima::fastdds::dds::DataReaderListener>> reader_listeners_;
   std::vector<eprosima::fastdds::dds::DataReader*> readers_;
@@ -290,14 +368,34 @@ class Participant {
   std::map<std::string, eprosima::fastdds::dds::Subscriber*> partition_subscribers_;
   eprosima::fastdds::dds::Subscriber* any_partition_subscriber_ = nullptr;  ///< secured bsn/raw readers
   struct Discovery;
-  std::unique_ptr<Discovery> discovery_;  ///< the partitions of discovered bsn/raw writers (secured only)
+  std::unique_ptr<Discovery> discovery_;  ///< discovered bsn/raw writers' partitions, handshakes (secured only)
   struct AdmissionFilters;
   std::unique_ptr<AdmissionFilters> admission_;  ///< the filter class of this participant's admitting readers
+  /// Held from make_writer/make_reader to the end of a re-creation: the recipes do not change meanwhile.
+  std::recursive_mutex endpoints_mutex_;
+  std::vector<WriterRecipe> writer_recipes_;
+  std::vector<ReaderRecipe> reader_recipes_;
+  std::shared_mutex writer_guard_;  ///< EndpointHandle::guard of every writer
+  /// An expectation of expect_peer: its endpoints, and since when none of them has been matched.
+  struct Expectation {
+    std::string peer;
+    std::vector<std::weak_ptr<EndpointEvents>> endpoints;
+    std::uint64_t unmatched_since_ns = 0;
+  };
+  std::vector<Expectation> expectations_;  ///< under endpoints_mutex_
+  std::uint64_t peer_bound_ns_ = 0;        ///< the current bound; 0 until the first watch
+  std::atomic<std::uint64_t> rejoins_{0};
   std::atomic<std::uint64_t> qos_mismatches_{0};
   std::atomic<std::uint64_t> undecodable_samples_{0};
   std::atomic<std::uint64_t> lost_samples_{0};
   std::atomic<std::uint64_t> rejected_samples_{0};
 };
+
+/// How long an expected peer may stay unmatched under DDS-Security before the participant is made again, s, and the
+/// longest such wait after tries (each doubles it). A secured handshake takes about 10 ms per pair on one host and
+/// seconds on a loaded 2-core machine with a dozen participants; 10 s is past every one that completed in tests.
+inline constexpr double kPeerBound_s = 10.0;
+inline constexpr double kMaxPeerBound_s = 60.0;
 
 /// Domain id from the environment variable BSN_DOMAIN, else 0. Throws std::invalid_argument naming the value when
 /// BSN_DOMAIN is set but not a domain id in 0..232 (never a fallback to 0: that may be another system's domain).
