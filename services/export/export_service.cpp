@@ -18,36 +18,17 @@
 #include "bsn/io/recording.hpp"
 #include "bsn/io/session_file.hpp"
 #include "sample_fields.hpp"
+#include "session_samples.hpp"
 
 namespace bsn::services {
 namespace {
 
 namespace fs = std::filesystem;
 
-// The serialised samples of one stream, deserialised.
+// The samples of one stream, serialised or as columns alone (session_samples.hpp).
 template <class PubSub>
 std::vector<typename PubSub::type> read_samples(const io::SessionReader& r, const io::SessionStream& s) {
-  const auto cdr = r.read_u8(s, "cdr");
-  const auto ends = r.read_u64(s, "cdr_end");
-  std::vector<typename PubSub::type> out;
-  out.reserve(ends.size());
-  PubSub type;
-  std::uint64_t begin = 0;
-  for (const std::uint64_t end : ends) {
-    if (end < begin || end > cdr.size()) {
-      throw io::IoError(r.path() + ": dataset '" + s.group + "/cdr_end' points outside '" + s.group + "/cdr'");
-    }
-    eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<std::uint32_t>(end - begin));
-    std::copy(cdr.begin() + static_cast<long>(begin), cdr.begin() + static_cast<long>(end), payload.data);
-    payload.length = static_cast<std::uint32_t>(end - begin);
-    typename PubSub::type sample;
-    if (!type.deserialize(&payload, &sample)) {
-      throw io::IoError(r.path() + ": a sample in '" + s.group + "/cdr' does not deserialise as " + s.type);
-    }
-    out.push_back(std::move(sample));
-    begin = end;
-  }
-  return out;
+  return read_stream_samples<PubSub>(r, s);
 }
 
 template <class T>

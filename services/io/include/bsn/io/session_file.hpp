@@ -29,6 +29,12 @@ struct ColumnSpec {
   std::string unit;  ///< "" = none
 };
 
+/// How a writer's datasets are chunked. Live: small chunks (a recorder flushes every second and keeps one chunk per
+/// dataset in memory). Bulk: a file written in a few large blocks (`bsn process`): each dataset's chunk is sized to
+/// its first block (at most kBulkChunkBytes), so a dataset is a handful of chunks instead of hundreds; readers see
+/// the same file either way.
+enum class ChunkLayout : std::uint8_t { kLive, kBulk };
+
 /// The value of the root attribute "format" that marks a bsn session file.
 inline constexpr const char* kSessionFormat = "bsn-session";
 
@@ -40,15 +46,17 @@ class SessionWriter {
  public:
   /// Creates `path` (an existing file is refused unless `overwrite`) with the root attributes `attributes` (plus
   /// format = kSessionFormat). Throws IoError naming the file.
-  SessionWriter(const std::string& path, bool overwrite, const std::map<std::string, std::string>& attributes);
+  SessionWriter(const std::string& path, bool overwrite, const std::map<std::string, std::string>& attributes,
+                ChunkLayout layout = ChunkLayout::kLive);
   ~SessionWriter();
   SessionWriter(const SessionWriter&) = delete;
   SessionWriter& operator=(const SessionWriter&) = delete;
 
   /// Registers the group /<topic>/<key> (the key escaped for HDF5: '/', '%' and a leading '.' as %XX) with its
-  /// columns; returns the stream's id. Its group is created at the next write_staged().
+  /// columns and string attributes of its own (besides topic, key and type); returns the stream's id. Its group is
+  /// created at the next write_staged().
   std::size_t add_stream(const std::string& topic, const std::string& key, const std::string& type_name,
-                         std::vector<ColumnSpec> columns);
+                         std::vector<ColumnSpec> columns, std::map<std::string, std::string> attributes = {});
   /// Appends `rows` rows of column `column` (rows x width elements of its type, contiguous).
   void append(std::size_t stream, std::size_t column, const void* data, std::size_t rows);
   /// Hands what was appended so far to the next write_staged(). Cheap (swaps buffers).
@@ -70,6 +78,8 @@ class SessionWriter {
   void create_stream(Stream& s);
   std::string path_;
   void set_metadata_cache_size();  ///< to the datasets created so far
+  unsigned long long chunk_rows(const Column& c, unsigned long long first_rows) const;
+  ChunkLayout layout_;
   long long file_id_ = -1;
   std::size_t metadata_cache_bytes_ = 0;
   std::vector<std::unique_ptr<Stream>> streams_;
@@ -81,7 +91,8 @@ struct SessionStream {
   std::string topic;
   std::string key;
   std::string type;
-  std::string group;  ///< HDF5 path of its group
+  std::string group;                              ///< HDF5 path of its group
+  std::map<std::string, std::string> attributes;  ///< the group's string attributes other than topic, key and type
 };
 
 /// Reads a session file. Every error names the file and the dataset.
