@@ -71,6 +71,10 @@ std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const f
   };
   std::vector<std::string> left_out;
   std::vector<io::ImportedNode> nodes = io::import_recordings(opt.input, opt.import.format, import, wanted, &left_out);
+  std::size_t samples = 0;
+  for (const io::ImportedNode& n : nodes) samples += n.rec.size();
+  in.truth.reserve(samples);
+  in.truth_arrival_ns.reserve(samples);
   for (std::size_t i = 0; i < body.segments.size(); ++i) {
     const fusion::SegmentSpec& spec = body.segments[i];
     auto it = std::find_if(nodes.begin(), nodes.end(), [&](const io::ImportedNode& n) { return n.name == spec.node; });

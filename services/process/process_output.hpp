@@ -25,24 +25,22 @@ class TopicOutput {
   /// serialised: each sample also as CDR (a topic whose texts may differ between the samples of one key).
   TopicOutput(io::SessionWriter& writer, const char* topic, bool serialised = !kColumnsOnly<T>)
       : writer_(writer), topic_(topic), serialised_(serialised) {}
-  /// Streams are looked up by a small index the caller keeps (a segment), so a sample costs no string work.
+  /// Streams are looked up by a small index the caller keeps (a segment), so a sample costs no string work. In a
+  /// columns-only topic every sample of one index must have the texts of its first (FusionPipeline's outputs have
+  /// their segment's or joint's, from the body), which the stream's attributes hold.
   void write(std::size_t index, const T& sample, std::uint64_t arrival_ns) {
     if (index >= streams_.size()) streams_.resize(index + 1);
     auto& s = streams_[index];
     if (!s) s = add_stream(sample);
-    writer_.append(s->id, kArrivalColumn, &arrival_ns, 1);
+    s->buffers[kArrivalColumn]->append_value(arrival_ns);
     if (serialised_) {
       if (!type_.serialize(const_cast<T*>(&sample), &payload_))
         throw io::IoError(std::string(topic_) + ": a sample does not serialise");
-      writer_.append(s->id, kCdrColumn, payload_.data, payload_.length);
+      s->buffers[kCdrColumn]->append(payload_.data, payload_.length);
       s->cdr_bytes += payload_.length;
-      writer_.append(s->id, kCdrEndColumn, &s->cdr_bytes, 1);
-    } else if (!has_text_fields(sample, s->texts)) {
-      // The stream's attributes hold the first sample's texts: another would be lost.
-      throw io::IoError(std::string(topic_) + ": the text fields of '" + key_of(sample) +
-                        "' change within the stream, which a columns-only stream cannot hold");
+      s->buffers[kCdrEndColumn]->append_value(s->cdr_bytes);
     }
-    AppendVisitor append(writer_, s->id, serialised_ ? kFirstFieldColumn : kFirstFieldColumnWithoutCdr);
+    BufferAppendVisitor append(s->buffers.data(), serialised_ ? kFirstFieldColumn : kFirstFieldColumnWithoutCdr);
     visit_fields(sample, append);
   }
 
@@ -50,7 +48,7 @@ class TopicOutput {
   struct Stream {
     std::size_t id = 0;
     std::uint64_t cdr_bytes = 0;
-    TextFields texts;  ///< columns-only: the texts every sample has
+    std::vector<io::ColumnBuffer*> buffers;  ///< its columns' buffers, in column order
   };
   Stream add_stream(const T& sample) {
     ColumnSpecVisitor spec(serialised_);
@@ -59,10 +57,11 @@ class TopicOutput {
     Stream s;
     std::map<std::string, std::string> attributes;
     if (!serialised_) {
-      s.texts = text_fields(sample);
-      attributes.insert(s.texts.begin(), s.texts.end());
+      const TextFields texts = text_fields(sample);
+      attributes.insert(texts.begin(), texts.end());
     }
     s.id = writer_.add_stream(topic_, key.empty() ? "_" : key, type_.getName(), spec.specs, attributes);
+    for (std::size_t c = 0; c < spec.specs.size(); ++c) s.buffers.push_back(&writer_.column_buffer(s.id, c));
     return s;
   }
   io::SessionWriter& writer_;

@@ -59,4 +59,23 @@ class AppendVisitor : public FieldVisitor {
   std::size_t column_;
 };
 
+/// AppendVisitor for a writer that appends every sample: straight into the columns' buffers (`buffers[k]`: the
+/// stream's column k, from SessionWriter::column_buffer), from `first_column` on.
+class BufferAppendVisitor : public FieldVisitor {
+ public:
+  BufferAppendVisitor(io::ColumnBuffer* const* buffers, std::size_t first_column)
+      : buffers_(buffers), column_(first_column) {}
+  void key(const char*, const std::string&) override {}
+  void text(const char*, const std::string&) override {}
+  void u64(const char*, const char*, std::uint64_t value) override { buffers_[column_++]->append_value(value); }
+  void u32(const char*, const char*, std::uint32_t value) override { buffers_[column_++]->append_value(value); }
+  void f64(const char*, const char*, const double* values, int n) override {
+    buffers_[column_++]->append(values, sizeof(double) * static_cast<std::size_t>(n));
+  }
+
+ private:
+  io::ColumnBuffer* const* buffers_;
+  std::size_t column_;
+};
+
 }  // namespace bsn::services

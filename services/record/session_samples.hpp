@@ -41,27 +41,6 @@ TextFields text_fields(const T& sample) {
   return std::move(texts.out);
 }
 
-/// True if `sample`'s text fields are `texts` (no allocation: a columns-only writer checks every sample).
-template <class T>
-bool has_text_fields(const T& sample, const TextFields& texts) {
-  struct Compare : FieldVisitor {
-    const TextFields* texts = nullptr;
-    std::size_t next = 0;
-    bool same = true;
-    void key(const char*, const std::string&) override {}
-    void text(const char*, const std::string& value) override {
-      same = same && next < texts->size() && (*texts)[next].second == value;
-      ++next;
-    }
-    void u64(const char*, const char*, std::uint64_t) override {}
-    void u32(const char*, const char*, std::uint32_t) override {}
-    void f64(const char*, const char*, const double*, int) override {}
-  } compare;
-  compare.texts = &texts;
-  visit_fields(sample, compare);
-  return compare.same && compare.next == texts.size();
-}
-
 /// The samples of a columns-only stream, rebuilt from its columns and its group's attributes. Throws io::IoError
 /// naming the file and the dataset.
 std::vector<bsn::Orientation> orientations_from_columns(const io::SessionReader& r, const io::SessionStream& s);

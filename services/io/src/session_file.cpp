@@ -145,8 +145,8 @@ std::size_t column_type_size(ColumnType type) {
 
 struct SessionWriter::Column {
   ColumnSpec spec;
-  std::vector<unsigned char> pending;  // appended, not yet staged
-  std::vector<unsigned char> staged;   // handed to the next write
+  ColumnBuffer pending;  // appended, not yet staged
+  ColumnBuffer staged;   // handed to the next write
   Handle dataset;
   hsize_t chunk = 0;  // rows per chunk, set when the dataset is created
   hsize_t rows_written = 0;
@@ -216,7 +216,19 @@ std::size_t SessionWriter::add_stream(const std::string& topic, const std::strin
 void SessionWriter::append(std::size_t stream, std::size_t column, const void* data, std::size_t rows) {
   Column& c = streams_.at(stream)->columns.at(column);
   const auto* bytes = static_cast<const unsigned char*>(data);
-  c.pending.insert(c.pending.end(), bytes, bytes + rows * c.row_bytes());
+  c.pending.append(bytes, rows * c.row_bytes());
+}
+
+ColumnBuffer& SessionWriter::column_buffer(std::size_t stream, std::size_t column) {
+  return streams_.at(stream)->columns.at(column).pending;
+}
+
+void ColumnBuffer::grow(std::size_t at_least) {
+  const std::size_t capacity = std::max<std::size_t>({at_least, 2 * capacity_, 4096});
+  std::unique_ptr<unsigned char[]> data(new unsigned char[capacity]);
+  if (size_ > 0) std::memcpy(data.get(), data_.get(), size_);
+  data_ = std::move(data);
+  capacity_ = capacity;
 }
 
 void SessionWriter::stage() {

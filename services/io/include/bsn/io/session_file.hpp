@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <map>
 #include <memory>
 #include <string>
@@ -35,6 +36,35 @@ struct ColumnSpec {
 /// the same file either way.
 enum class ChunkLayout : std::uint8_t { kLive, kBulk };
 
+/// The bytes appended to one column and not yet written: a growing buffer whose append is a copy (no
+/// initialisation of new bytes, no lookup), for writers that append every sample.
+class ColumnBuffer {
+ public:
+  void append(const void* data, std::size_t bytes) {
+    if (bytes == 0) return;
+    if (size_ + bytes > capacity_) grow(size_ + bytes);
+    std::memcpy(data_.get() + size_, data, bytes);
+    size_ += bytes;
+  }
+  template <class T>
+  void append_value(const T& value) {
+    append(&value, sizeof value);
+  }
+  const unsigned char* data() const { return data_.get(); }
+  std::size_t size() const { return size_; }
+  void clear() { size_ = 0; }
+  void swap(ColumnBuffer& other) noexcept {
+    data_.swap(other.data_);
+    std::swap(size_, other.size_);
+    std::swap(capacity_, other.capacity_);
+  }
+
+ private:
+  void grow(std::size_t at_least);
+  std::unique_ptr<unsigned char[]> data_;
+  std::size_t size_ = 0, capacity_ = 0;
+};
+
 /// The value of the root attribute "format" that marks a bsn session file.
 inline constexpr const char* kSessionFormat = "bsn-session";
 
@@ -59,6 +89,9 @@ class SessionWriter {
                          std::vector<ColumnSpec> columns, std::map<std::string, std::string> attributes = {});
   /// Appends `rows` rows of column `column` (rows x width elements of its type, contiguous).
   void append(std::size_t stream, std::size_t column, const void* data, std::size_t rows);
+  /// The buffer that append() fills for a column: appending whole rows to it is appending to the column. Valid as
+  /// long as the writer; the same serialisation rules as append().
+  ColumnBuffer& column_buffer(std::size_t stream, std::size_t column);
   /// Hands what was appended so far to the next write_staged(). Cheap (swaps buffers).
   void stage();
   /// Writes what stage() handed over, then flushes the file to disk. Before writing it checks the free space
