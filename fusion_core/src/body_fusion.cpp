@@ -31,6 +31,7 @@ BodyFusion::BodyFusion(BodyModel body, const Calibrations& calibrations, const P
     segments_[i].gate = SampleGate(params.gate);
     if (const auto c = calibrations.find(spec.node); c != calibrations.end()) segments_[i].calibration = c->second;
     segments_[i].parent = body_.find_segment(spec.parent);
+    segments_[i].convention = joint_convention(spec);
     if (spec.kinematic_heading && segments_[i].parent)
       segments_[i].kinematic_heading.emplace(*kinematic_heading_params(spec));
     if (spec.sensor_to_segment) {
@@ -141,7 +142,7 @@ void BodyFusion::estimate_joint(Segment& seg, SampleResult& r) {
       child_q_segment = seg.kinematic_heading->correct(child_q_segment);
     }
     const Quat relative = canonical(relative_orientation(parent_q, child_q));
-    const JointConvention convention = joint_convention(spec);
+    const JointConvention& convention = seg.convention;
     r.joint = JointEstimate{*seg.parent,
                             r.segment,
                             relative,

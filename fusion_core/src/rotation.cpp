@@ -40,22 +40,35 @@ std::optional<AxisSequence> parse_axis_sequence(std::string_view text) {
 
 // For R = R_i(a) R_j(b) R_k(c) with distinct i, j, k and s = +1 for a cyclic (i, j, k), -1 otherwise:
 //   sin b = s R(i,k),  a = atan2(-s R(j,k), R(k,k)),  c = atan2(-s R(i,j), R(i,i)).
+// The five elements come straight from the quaternion, R = ((w^2 - |v|^2) I + 2 v v^T + 2 w [v]x) / |q|^2, without
+// building the matrix: the joint angles decompose every joint sample twice.
 Vec3 decompose(const Quat& q, const AxisSequence& seq) {
-  const Eigen::Matrix3d r = q.normalized().toRotationMatrix();
   const int i = seq.axes[0], j = seq.axes[1], k = seq.axes[2];
   const double s = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
-  const double sb = std::clamp(s * r(i, k), -1.0, 1.0);
+  const double w = q.w();
+  const double v[3] = {q.x(), q.y(), q.z()};
+  const double n2 = w * w + v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+  const double diag = w * w - (n2 - w * w);  // w^2 - |v|^2
+  // Off the diagonal [v]x(a, b) = -v_c when (a, b, c) is cyclic, +v_c otherwise.
+  auto element = [&](int a, int b) {
+    if (a == b) return diag + 2.0 * v[a] * v[a];
+    const int c = 3 - a - b;
+    const double cross = ((b - a + 3) % 3 == 1) ? -v[c] : v[c];
+    return 2.0 * (v[a] * v[b] + w * cross);
+  };
+  const double sb = std::clamp(s * element(i, k) / n2, -1.0, 1.0);
   const double b = std::asin(sb);
   double a, c;
   if (std::abs(sb) > 1.0 - 1e-12) {
     // Gimbal lock: only a +- c is defined. Put it all in the first angle.
     c = 0.0;
+    const Eigen::Matrix3d r = q.normalized().toRotationMatrix();
     const Eigen::Matrix3d rest = r * axis_rotation(j, -b).toRotationMatrix();
     // At the lock R_j(b) R_k(c) R_j(-b) turns about +-axis i, so rest is a pure rotation about axis i.
     a = std::atan2(s * rest(k, j), rest(j, j));
   } else {
-    a = std::atan2(-s * r(j, k), r(k, k));
-    c = std::atan2(-s * r(i, j), r(i, i));
+    a = std::atan2(-s * element(j, k), element(k, k));
+    c = std::atan2(-s * element(i, j), element(i, i));
   }
   return {a, b, c};
 }

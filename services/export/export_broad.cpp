@@ -22,7 +22,7 @@ NodeTruth node_truth(const io::SessionReader& r) {
   NodeTruth out;
   for (const char* topic : {dds::kOrientationTopic.name, dds::kTruthOrientationTopic.name}) {
     for (const auto& s : r.streams_of(topic)) {
-      const auto samples = read_samples<bsn::OrientationPubSubType>(r, s);
+      const auto samples = read_stream_samples<bsn::OrientationPubSubType>(r, s);
       for (const auto& o : samples) {
         out.segment_of[o.node_id()] = o.segment();
         if (topic == std::string(dds::kTruthOrientationTopic.name))

@@ -57,7 +57,7 @@ int export_csv(const io::SessionReader& r, const fs::path& out) {
         for (std::size_t si = per_key ? k : 0; si < (per_key ? k + 1 : streams.size()); ++si) {
           const auto& s = streams[si];
           const auto arrival = r.read_u64(s, "arrival_ns");
-          const auto samples = read_samples<PubSub>(r, s);
+          const auto samples = read_stream_samples<PubSub>(r, s);
           for (std::size_t i = 0; i < samples.size(); ++i) {
             if (!header) {
               f << "arrival_ns [ns since 1970]," << csv_header(samples[i], per_key) << "\n";

@@ -42,7 +42,7 @@ std::map<std::string, std::vector<Alignment>> recorded_alignments(const io::Sess
   std::map<std::string, std::vector<Alignment>> out;
   for (const auto& s : r.streams_of(dds::kCalibrationResultTopic.name)) {
     const auto arrival = r.read_u64(s, "arrival_ns");
-    const auto results = read_samples<bsn::CalibrationResultPubSubType>(r, s);
+    const auto results = read_stream_samples<bsn::CalibrationResultPubSubType>(r, s);
     for (std::size_t i = 0; i < results.size(); ++i) {
       const auto& c = results[i];
       if (c.kind() != bsn::CALIBRATION_SEGMENT_ALIGNMENT || !c.success()) continue;
@@ -129,7 +129,7 @@ OrientationTable orientation_table(const io::SessionReader& r, const std::string
   OrientationTable out;
   for (const auto& s : r.streams_of(topic)) {
     const auto arrival = r.read_u64(s, "arrival_ns");
-    const auto samples = read_samples<bsn::OrientationPubSubType>(r, s);
+    const auto samples = read_stream_samples<bsn::OrientationPubSubType>(r, s);
     Track& t = out.tracks[s.key];
     std::set<std::string> how;
     for (std::size_t i = 0; i < samples.size(); ++i) {
@@ -253,7 +253,7 @@ std::size_t write_joint_mot(const io::SessionReader& r, const std::string& topic
   std::map<std::string, std::array<std::string, 3>> names;
   std::size_t recomputed = 0;
   for (const auto& s : r.streams_of(topic)) {
-    const auto samples = read_samples<bsn::JointAnglesPubSubType>(r, s);
+    const auto samples = read_stream_samples<bsn::JointAnglesPubSubType>(r, s);
     for (const auto& j : samples) {
       if (j.anatomy().empty() || j.anatomical_names().size() != 3) continue;
       std::array<double, 3> a = j.anatomical();
@@ -315,7 +315,7 @@ void write_alignment_csv(const fs::path& path, const OrientationTable& table, co
                          const std::map<std::string, std::vector<Alignment>>& alignments) {
   std::map<std::string, std::string> node_of;
   for (const auto& s : r.streams_of(dds::kOrientationTopic.name)) {
-    const auto samples = read_samples<bsn::OrientationPubSubType>(r, s);
+    const auto samples = read_stream_samples<bsn::OrientationPubSubType>(r, s);
     if (!samples.empty()) node_of[s.key] = samples.back().node_id();
   }
   std::ofstream f(path);

@@ -167,12 +167,16 @@ TEST_F(Process, AFolderOfRecordingsIsDeterministicAndExportable) {
   ASSERT_EQ(r.streams_of("bsn/status").size(), 1u);
   // bsn export reads it as it reads a live session.
   ASSERT_EQ(run("export", {"export", a, "--format", "csv", "--out", (dir() / "csv").string()}), 0) << output("export");
-  // One CSV file per joint (its columns carry the joint's own angle names), each with all 1200 of its samples.
-  for (const std::string joint : {"hip_l", "knee_l"}) {
+  // One CSV file per joint (its columns carry the joint's own angle names), each with all 1200 of its samples. The
+  // joint angles are columns alone in the file (no serialised copy): their texts come from the stream's attributes.
+  for (const auto& [joint, segments] :
+       {std::pair<std::string, std::string>{"hip_l", ",pelvis,thigh_l,"}, {"knee_l", ",thigh_l,shank_l,"}}) {
     const std::string csv = read_file(dir() / "csv" / ("joint_angles_" + joint + ".csv"));
-    EXPECT_NE(csv.find(joint), std::string::npos) << joint;
+    EXPECT_NE(csv.find(joint + segments), std::string::npos) << joint;
+    EXPECT_NE(csv.find("flexion_extension [rad]"), std::string::npos) << joint;
     EXPECT_GT(std::count(csv.begin(), csv.end(), '\n'), 1200) << joint;
   }
+  for (const auto& s : r.streams_of("bsn/joint_angles")) EXPECT_FALSE(r.has(s, "cdr")) << s.key;
   // The other filter: different numbers, same layout.
   ASSERT_EQ(run("ekf", {"process", (dir() / "lab").string(), "--body", body, "--filter", "ekf", "--out",
                         (dir() / "ekf.h5").string()}),

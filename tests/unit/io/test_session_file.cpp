@@ -22,6 +22,45 @@ class SessionFile : public ::testing::Test {
   std::filesystem::path dir_;
 };
 
+// The bulk layout (large chunks sized to a dataset's first block) is invisible to a reader; a stream's own
+// attributes are read back with it.
+TEST_F(SessionFile, BulkChunksAndStreamAttributesReadBackExactly) {
+  const std::string path = file("bulk.h5");
+  {
+    SessionWriter w(path, false, {}, ChunkLayout::kBulk);
+    const std::size_t a = w.add_stream("bsn/orientation", "thigh_l", "bsn::Orientation",
+                                       {{"timestamp_ns", ColumnType::kU64, 1, "ns"}, {"quat", ColumnType::kF64, 4, ""}},
+                                       {{"node_id", "imu3"}, {"empty", ""}});
+    const std::size_t b = w.add_stream("bsn/status", "p", "bsn::Status", {{"wall_time_ns", ColumnType::kU64, 1, ""}});
+    for (std::uint64_t i = 0; i < 10000; ++i) {
+      const double q[4] = {1.0, static_cast<double>(i), -0.5, 1e-300};
+      w.append(a, 0, &i, 1);
+      w.append(a, 1, q, 1);
+      if (i == 2999 || i == 7000) {  // blocks of unequal sizes: chunks filled partly, across writes
+        w.stage();
+        w.write_staged();
+      }
+    }
+    const std::uint64_t one = 7;
+    w.append(b, 0, &one, 1);
+    w.close();
+  }
+  const SessionReader r(path);
+  const auto s = r.streams_of("bsn/orientation");
+  ASSERT_EQ(s.size(), 1u);
+  EXPECT_EQ(s[0].attributes, (std::map<std::string, std::string>{{"node_id", "imu3"}, {"empty", ""}}));
+  const auto ts = r.read_u64(s[0], "timestamp_ns");
+  const auto q = r.read_f64(s[0], "quat", 4);
+  ASSERT_EQ(ts.size(), 10000u);
+  for (std::size_t i = 0; i < ts.size(); ++i) {
+    ASSERT_EQ(ts[i], i);
+    ASSERT_EQ(q[4 * i + 1], static_cast<double>(i));
+    ASSERT_EQ(q[4 * i + 3], 1e-300);
+  }
+  EXPECT_EQ(r.read_u64(r.streams_of("bsn/status").at(0), "wall_time_ns"), std::vector<std::uint64_t>{7});
+  EXPECT_TRUE(r.streams_of("bsn/status").at(0).attributes.empty());
+}
+
 TEST_F(SessionFile, ColumnsWrittenInSeveralFlushesReadBackExactly) {
   const std::string path = file("s.h5");
   {

@@ -96,6 +96,7 @@ class BodyFusion {
     SampleGate gate;  ///< counts received, accepted, missing, clock resets, rejected by reason
     calib::SensorCalibration calibration;
     std::optional<std::size_t> parent;
+    JointConvention convention;         ///< of the joint to the parent, from the body (found once: it parses names)
     std::uint64_t filter_rejected = 0;  ///< passed the gate, not used by the filter
     std::optional<Quat> q;              ///< the last published orientation (sensor frame, or segment frame if aligned)
     std::optional<Quat> q_segment;      ///< the last segment (ISB) frame orientation, default mounting if not aligned

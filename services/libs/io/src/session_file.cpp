@@ -16,11 +16,17 @@ using hdf5::Handle;
 
 namespace {
 
-// Rows per chunk: at 100 Hz about 5 s per chunk, small enough that a 64-segment body's thousand-odd open datasets
-// stay a few MB of chunk cache, large enough that indexing costs little.
+// Live: rows per chunk: at 100 Hz about 5 s per chunk, small enough that a 64-segment body's thousand-odd open
+// datasets stay a few MB of chunk cache, large enough that indexing costs little.
 constexpr hsize_t kChunkRows = 512;
 // A byte column (serialised samples) holds about 100 bytes per sample: its chunks hold about as many samples.
-hsize_t chunk_rows(ColumnType t) { return t == ColumnType::kU8 ? kChunkRows * 64 : kChunkRows; }
+hsize_t live_chunk_rows(ColumnType t) { return t == ColumnType::kU8 ? kChunkRows * 64 : kChunkRows; }
+// Bulk: a chunk holds the dataset's first block, between kBulkMinChunkRows rows (a stream of a few rows, e.g. one
+// bsn/status, stays a few KB) and kBulkChunkBytes (a chunk is read whole: 4 MiB keeps a reader's memory small).
+// Each chunk costs HDF5 a B-tree insertion and a write of its own; with live chunks a 10-minute 7-segment body is
+// about 30,000 of them.
+constexpr hsize_t kBulkMinChunkRows = 1024;
+constexpr hsize_t kBulkChunkBytes = 4u << 20;
 
 // Half the most chunks a chunk-index B-tree node holds (HDF5's "istore_k"; its default is 32).
 constexpr unsigned kChunkIndexK = 8;
@@ -139,22 +145,24 @@ std::size_t column_type_size(ColumnType type) {
 
 struct SessionWriter::Column {
   ColumnSpec spec;
-  std::vector<unsigned char> pending;  // appended, not yet staged
-  std::vector<unsigned char> staged;   // handed to the next write
+  ColumnBuffer pending;  // appended, not yet staged
+  ColumnBuffer staged;   // handed to the next write
   Handle dataset;
+  hsize_t chunk = 0;  // rows per chunk, set when the dataset is created
   hsize_t rows_written = 0;
   std::size_t row_bytes() const { return column_type_size(spec.type) * static_cast<std::size_t>(spec.width); }
 };
 
 struct SessionWriter::Stream {
   std::string topic, key, type;
+  std::map<std::string, std::string> attributes;
   std::vector<Column> columns;
   Handle group;
 };
 
 SessionWriter::SessionWriter(const std::string& path, bool overwrite,
-                             const std::map<std::string, std::string>& attributes)
-    : path_(path) {
+                             const std::map<std::string, std::string>& attributes, ChunkLayout layout)
+    : path_(path), layout_(layout) {
   hdf5::quiet_errors();
   if (!overwrite && std::filesystem::exists(path)) {
     throw IoError(path + ": file exists; give --overwrite to replace it");
@@ -190,11 +198,12 @@ SessionWriter::~SessionWriter() {
 }
 
 std::size_t SessionWriter::add_stream(const std::string& topic, const std::string& key, const std::string& type_name,
-                                      std::vector<ColumnSpec> columns) {
+                                      std::vector<ColumnSpec> columns, std::map<std::string, std::string> attributes) {
   auto s = std::make_unique<Stream>();
   s->topic = topic;
   s->key = key;
   s->type = type_name;
+  s->attributes = std::move(attributes);
   for (auto& spec : columns) {
     Column c;
     c.spec = std::move(spec);
@@ -207,7 +216,19 @@ std::size_t SessionWriter::add_stream(const std::string& topic, const std::strin
 void SessionWriter::append(std::size_t stream, std::size_t column, const void* data, std::size_t rows) {
   Column& c = streams_.at(stream)->columns.at(column);
   const auto* bytes = static_cast<const unsigned char*>(data);
-  c.pending.insert(c.pending.end(), bytes, bytes + rows * c.row_bytes());
+  c.pending.append(bytes, rows * c.row_bytes());
+}
+
+ColumnBuffer& SessionWriter::column_buffer(std::size_t stream, std::size_t column) {
+  return streams_.at(stream)->columns.at(column).pending;
+}
+
+void ColumnBuffer::grow(std::size_t at_least) {
+  const std::size_t capacity = std::max<std::size_t>({at_least, 2 * capacity_, 4096});
+  std::unique_ptr<unsigned char[]> data(new unsigned char[capacity]);
+  if (size_ > 0) std::memcpy(data.get(), data_.get(), size_);
+  data_ = std::move(data);
+  capacity_ = capacity;
 }
 
 void SessionWriter::stage() {
@@ -233,11 +254,16 @@ void SessionWriter::create_stream(Stream& s) {
       !write_string_attribute(s.group.get(), "key", s.key) || !write_string_attribute(s.group.get(), "type", s.type)) {
     throw IoError(path_ + ": cannot write the attributes of '" + group_path + "'");
   }
+  for (const auto& [name, value] : s.attributes) {
+    if (!write_string_attribute(s.group.get(), name, value))
+      throw IoError(path_ + ": cannot write the attribute '" + name + "' of '" + group_path + "'");
+  }
   for (Column& c : s.columns) {
     const int rank = c.spec.width > 1 ? 2 : 1;
     const hsize_t dims[2] = {0, static_cast<hsize_t>(c.spec.width)};
     const hsize_t maxdims[2] = {H5S_UNLIMITED, static_cast<hsize_t>(c.spec.width)};
-    const hsize_t chunk[2] = {chunk_rows(c.spec.type), static_cast<hsize_t>(c.spec.width)};
+    c.chunk = chunk_rows(c, c.staged.size() / c.row_bytes());
+    const hsize_t chunk[2] = {c.chunk, static_cast<hsize_t>(c.spec.width)};
     Handle space(H5Screate_simple(rank, dims, maxdims), H5Sclose);
     Handle dcpl(hdf5::untimed_dataset_properties(), H5Pclose);
     H5Pset_chunk(dcpl.get(), rank, chunk);
@@ -253,6 +279,12 @@ void SessionWriter::create_stream(Stream& s) {
       throw IoError(path_ + ": cannot write the unit of '" + group_path + "/" + c.spec.name + "'");
     }
   }
+}
+
+unsigned long long SessionWriter::chunk_rows(const Column& c, unsigned long long first_rows) const {
+  if (layout_ == ChunkLayout::kLive) return live_chunk_rows(c.spec.type);
+  const hsize_t most = std::max<hsize_t>(1, kBulkChunkBytes / c.row_bytes());
+  return std::min(most, std::max<hsize_t>(first_rows, kBulkMinChunkRows));
 }
 
 void SessionWriter::set_metadata_cache_size() {
@@ -281,7 +313,7 @@ void SessionWriter::write_staged() {
     for (const Column& c : s->columns) {
       const hsize_t rows = c.staged.size() / c.row_bytes();
       if (rows == 0) continue;
-      const hsize_t chunk = chunk_rows(c.spec.type);
+      const hsize_t chunk = c.chunk ? c.chunk : chunk_rows(c, rows);
       const hsize_t before = (c.rows_written + chunk - 1) / chunk, after = (c.rows_written + rows + chunk - 1) / chunk;
       bytes += (after - before) * chunk * c.row_bytes();
     }
@@ -353,6 +385,13 @@ struct VisitState {
   std::vector<SessionStream>* streams;
 };
 
+herr_t collect_attribute(hid_t object, const char* name, const H5A_info_t*, void* data) {
+  auto* out = static_cast<std::map<std::string, std::string>*>(data);
+  std::string value;
+  if (read_string_attribute(object, name, value)) (*out)[name] = value;
+  return 0;
+}
+
 herr_t visit_link(hid_t, const char* name, const H5L_info_t* info, void* data) {
   auto* state = static_cast<VisitState*>(data);
   if (info->type != H5L_TYPE_HARD) return 0;
@@ -364,15 +403,11 @@ herr_t visit_link(hid_t, const char* name, const H5L_info_t* info, void* data) {
   if (!read_string_attribute(object.get(), "topic", s.topic)) return 0;
   read_string_attribute(object.get(), "key", s.key);
   read_string_attribute(object.get(), "type", s.type);
+  hsize_t index = 0;
+  H5Aiterate2(object.get(), H5_INDEX_NAME, H5_ITER_INC, &index, collect_attribute, &s.attributes);
+  for (const char* own : {"topic", "key", "type"}) s.attributes.erase(own);
   s.group = std::string("/") + name;
   state->streams->push_back(std::move(s));
-  return 0;
-}
-
-herr_t collect_attribute(hid_t object, const char* name, const H5A_info_t*, void* data) {
-  auto* out = static_cast<std::map<std::string, std::string>*>(data);
-  std::string value;
-  if (read_string_attribute(object, name, value)) (*out)[name] = value;
   return 0;
 }
 

@@ -7,6 +7,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <map>
 #include <memory>
 #include <string>
@@ -29,6 +30,41 @@ struct ColumnSpec {
   std::string unit;  ///< "" = none
 };
 
+/// How a writer's datasets are chunked. Live: small chunks (a recorder flushes every second and keeps one chunk per
+/// dataset in memory). Bulk: a file written in a few large blocks (`bsn process`): each dataset's chunk is sized to
+/// its first block (at most kBulkChunkBytes), so a dataset is a handful of chunks instead of hundreds; readers see
+/// the same file either way.
+enum class ChunkLayout : std::uint8_t { kLive, kBulk };
+
+/// The bytes appended to one column and not yet written: a growing buffer whose append is a copy (no
+/// initialisation of new bytes, no lookup), for writers that append every sample.
+class ColumnBuffer {
+ public:
+  void append(const void* data, std::size_t bytes) {
+    if (bytes == 0) return;
+    if (size_ + bytes > capacity_) grow(size_ + bytes);
+    std::memcpy(data_.get() + size_, data, bytes);
+    size_ += bytes;
+  }
+  template <class T>
+  void append_value(const T& value) {
+    append(&value, sizeof value);
+  }
+  const unsigned char* data() const { return data_.get(); }
+  std::size_t size() const { return size_; }
+  void clear() { size_ = 0; }
+  void swap(ColumnBuffer& other) noexcept {
+    data_.swap(other.data_);
+    std::swap(size_, other.size_);
+    std::swap(capacity_, other.capacity_);
+  }
+
+ private:
+  void grow(std::size_t at_least);
+  std::unique_ptr<unsigned char[]> data_;
+  std::size_t size_ = 0, capacity_ = 0;
+};
+
 /// The value of the root attribute "format" that marks a bsn session file.
 inline constexpr const char* kSessionFormat = "bsn-session";
 
@@ -40,17 +76,22 @@ class SessionWriter {
  public:
   /// Creates `path` (an existing file is refused unless `overwrite`) with the root attributes `attributes` (plus
   /// format = kSessionFormat). Throws IoError naming the file.
-  SessionWriter(const std::string& path, bool overwrite, const std::map<std::string, std::string>& attributes);
+  SessionWriter(const std::string& path, bool overwrite, const std::map<std::string, std::string>& attributes,
+                ChunkLayout layout = ChunkLayout::kLive);
   ~SessionWriter();
   SessionWriter(const SessionWriter&) = delete;
   SessionWriter& operator=(const SessionWriter&) = delete;
 
   /// Registers the group /<topic>/<key> (the key escaped for HDF5: '/', '%' and a leading '.' as %XX) with its
-  /// columns; returns the stream's id. Its group is created at the next write_staged().
+  /// columns and string attributes of its own (besides topic, key and type); returns the stream's id. Its group is
+  /// created at the next write_staged().
   std::size_t add_stream(const std::string& topic, const std::string& key, const std::string& type_name,
-                         std::vector<ColumnSpec> columns);
+                         std::vector<ColumnSpec> columns, std::map<std::string, std::string> attributes = {});
   /// Appends `rows` rows of column `column` (rows x width elements of its type, contiguous).
   void append(std::size_t stream, std::size_t column, const void* data, std::size_t rows);
+  /// The buffer that append() fills for a column: appending whole rows to it is appending to the column. Valid as
+  /// long as the writer; the same serialisation rules as append().
+  ColumnBuffer& column_buffer(std::size_t stream, std::size_t column);
   /// Hands what was appended so far to the next write_staged(). Cheap (swaps buffers).
   void stage();
   /// Writes what stage() handed over, then flushes the file to disk. Before writing it checks the free space
@@ -70,6 +111,8 @@ class SessionWriter {
   void create_stream(Stream& s);
   std::string path_;
   void set_metadata_cache_size();  ///< to the datasets created so far
+  unsigned long long chunk_rows(const Column& c, unsigned long long first_rows) const;
+  ChunkLayout layout_;
   long long file_id_ = -1;
   std::size_t metadata_cache_bytes_ = 0;
   std::vector<std::unique_ptr<Stream>> streams_;
@@ -81,7 +124,8 @@ struct SessionStream {
   std::string topic;
   std::string key;
   std::string type;
-  std::string group;  ///< HDF5 path of its group
+  std::string group;                              ///< HDF5 path of its group
+  std::map<std::string, std::string> attributes;  ///< the group's string attributes other than topic, key and type
 };
 
 /// Reads a session file. Every error names the file and the dataset.
