@@ -65,7 +65,11 @@ int run_cli(int argc, char** argv, std::span<const Command> commands,
   std::vector<std::pair<CLI::App*, std::function<int()>>> runs;
   for (const Command& c : commands) {
     CLI::App* sub = app.add_subcommand(c.name, c.description);
-    if (footer) sub->footer(footer(c.name));
+    if (!c.examples.empty()) {
+      sub->footer("Examples:\n" + c.examples + "\n");
+    } else if (footer) {
+      sub->footer(footer(c.name));
+    }
     runs.emplace_back(sub, c.add_options(sub));
   }
   try {

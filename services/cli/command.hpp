@@ -22,6 +22,9 @@ struct Command {
   std::string name;
   std::string description;
   std::function<std::function<int()>(CLI::App*)> add_options;
+  /// Example command lines for the end of its --help, one per line (a new command writes them here; the older ones
+  /// are in command_examples.cpp's table). Empty: the table's entry.
+  std::string examples = {};
 };
 
 /// The examples and choices of command `name` for its --help (empty if the table has none).

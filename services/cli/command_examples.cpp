@@ -1,5 +1,5 @@
-// The examples and choices at the end of each subcommand's --help: one table, so every command has them and a new
-// command adds one entry here (the CLI unit test fails for a command without one). The examples are commands that
+// The examples and choices at the end of each subcommand's --help, for the commands that do not carry their own
+// (Command::examples; the CLI usage test fails for a command with neither). The examples are commands that
 // run as written from a checkout after `cmake --workflow --preset build` (paths are the repository's own).
 #include <map>
 #include <string>
