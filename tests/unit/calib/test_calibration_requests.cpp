@@ -1,6 +1,6 @@
 // The calibration service's bookkeeping without DDS: requests answered once, refusals said again, a node collected
-// by one request at a time, "*" as the nodes heard lately, a collection ended by its sample count, by its duration, by a
-// cancel or by the service stopping, progress at its period.
+// by one request at a time, "*" as the nodes heard lately, a collection ended by its sample count, by its duration, by
+// a cancel or by the service stopping, progress at its period.
 #include <gtest/gtest.h>
 
 #include <random>
