@@ -87,8 +87,8 @@ void visit_fields(const bsn::Status& s, FieldVisitor& v) {
   v.u64("unknown_node_samples", "", s.unknown_node_samples());
   v.u64("qos_mismatches", "", s.qos_mismatches());
   v.u64("write_failures", "", s.write_failures());
-  v.u64("participant_rejoins", "", s.participant_rejoins());
   v.text("last_calibration_id", s.last_calibration_id());
+  v.u64("participant_rejoins", "", s.participant_rejoins());
 }
 
 void visit_fields(const bsn::CalibrationRequest& s, FieldVisitor& v) {

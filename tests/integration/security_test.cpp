@@ -412,8 +412,8 @@ TEST_F(Security, SecuredNodesAllJoinUnderLoad) {
       std::printf("[ rejoin   ] %s: %s\n", process.c_str(), log.substr(at, log.find('\n', at) - at).c_str());
     }
   }
-  std::printf("[ measure  ] %ld of %zu nodes joined in %.1f s; %d new participants besides pelvis's\n", joined(), nodes.size(),
-              std::chrono::duration<double>(Clock::now() - start).count(), rejoins);
+  std::printf("[ measure  ] %ld of %zu nodes joined in %.1f s; %d new participants besides pelvis's\n", joined(),
+              nodes.size(), std::chrono::duration<double>(Clock::now() - start).count(), rejoins);
   EXPECT_TRUE(all) << joined() << " of " << nodes.size() << " secured nodes joined within 60 s";
   status.reset();
 }

@@ -273,7 +273,8 @@ struct Participant::Discovery final : DomainParticipantListener {
     bool authorised = false;
   };
   std::map<GuidPrefix, Handshake> handshakes;
-  std::uint64_t refused = 0;  ///< participants whose authentication failed
+  std::uint64_t refused = 0;             ///< participants whose authentication failed
+  std::uint64_t last_authorised_ns = 0;  ///< when the last handshake finished
   /// The identity folder, kept for the participant's re-creation (the environment may have changed since).
   std::string security_dir;
 
@@ -293,6 +294,7 @@ struct Participant::Discovery final : DomainParticipantListener {
     std::lock_guard lock(mutex);
     if (info.status == Info::AUTHORIZED_PARTICIPANT) {
       handshakes.try_emplace(info.guid.guidPrefix, Handshake{monotonic_ns(), false}).first->second.authorised = true;
+      last_authorised_ns = monotonic_ns();
     } else {
       ++refused;
       handshakes.erase(info.guid.guidPrefix);
@@ -326,6 +328,11 @@ struct Participant::Discovery final : DomainParticipantListener {
          << "+ s ago without a finished handshake" << (n > 0 ? ":" : "") << out.str();
     if (refused > 0) text << ", " << refused << " refused";
     return text.str();
+  }
+  /// True if a handshake finished within the last `window_ns`: the handshakes progress, only slowly.
+  bool progressing(std::uint64_t window_ns) const {
+    std::lock_guard lock(mutex);
+    return last_authorised_ns != 0 && monotonic_ns() - last_authorised_ns < window_ns;
   }
   void clear() {
     std::lock_guard lock(mutex);
@@ -701,6 +708,9 @@ bool Participant::watch_peers() {
   }
   if (all_met) peer_bound_ns_ = static_cast<std::uint64_t>(kPeerBound_s * 1e9);
   if (unmet == nullptr) return false;
+  // On a loaded machine with many participants the handshakes take seconds each; while some still finish, a new
+  // participant would only start them all again (every process at once, a storm that never settles).
+  if (discovery_->progressing(peer_bound_ns_ / 4)) return false;
   const std::uint64_t rejoin = ++rejoins_;
   logging::log_error("no ", unmet->peer, " matched in ", peer_bound_ns_ / 1'000'000'000ull, " s (",
                      discovery_->unfinished_handshakes(peer_bound_ns_ / 2),

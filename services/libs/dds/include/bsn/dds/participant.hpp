@@ -269,7 +269,8 @@ class Participant {
   /// Fast DDS 2.9.1 sometimes never completes the DDS-Security handshake of two participants and never tries
   /// again while both live (docs/deployment.md, DDS-Security). Under DDS-Security, if an expectation (expect_peer)
   /// has had no match for kPeerBound_s (doubling after each try, up to kMaxPeerBound_s), this logs an error naming
-  /// the peer and the handshakes still unfinished, counts it (rejoins()) and makes the participant again, with a new
+  /// the peer and the handshakes still unfinished, counts it (rejoins()) and makes the participant again (unless some
+  /// handshake finished within the last quarter of the bound: they are slow, not stuck), with a new
   /// GUID and every endpoint whose Writer or Reader still lives: a fresh handshake with everyone. Call it from one
   /// thread, periodically (DdsCommandFrame::run_ticks does); not from a DDS callback. True if it made it again.
   bool watch_peers();
