@@ -109,42 +109,46 @@ const SampleResult& BodyFusion::process(const NodeSample& in, std::uint64_t arri
   seg.rate = s.has_gyr ? Vec3(s.gyr - r.gyro_bias) : Vec3::Zero();
   seg.timestamp_ns = s.timestamp_ns;
   if (const Segment* parent = seg.parent ? &segments_[*seg.parent] : nullptr; parent && parent->q) {
-    const SegmentSpec& spec = body_.segments[r.segment];
-    // The parent at the child's sample time: its latest orientation turned on by its rate over the lag (one clock).
-    Quat parent_q = *parent->q, parent_q_segment = *parent->q_segment;
-    // Signed (the parent may also be ahead); the modular difference is exact for any lag within the bound.
-    const auto lag_ns = static_cast<std::int64_t>(seg.timestamp_ns - parent->timestamp_ns);
-    const auto max_ns = static_cast<std::int64_t>(max_joint_extrapolation_ns_);
-    if (lag_ns != 0 && lag_ns >= -max_ns && lag_ns <= max_ns) {
-      const double dt = 1e-9 * static_cast<double>(lag_ns);
-      const Quat turned = (parent->q_sensor * exp_rotation_vector(parent->rate * dt)).normalized();
-      parent_q_segment = segment_orientation(turned, parent->sensor_to_segment);
-      parent_q = parent->aligned ? parent_q_segment : turned;
-    }
-    Quat child_q = *seg.q, child_q_segment = *seg.q_segment;
-    std::optional<HingeHeadingEstimator::State> heading;
-    if (seg.kinematic_heading) {
-      // A restarted filter starts a new heading: the offset learnt against the old one no longer holds.
-      if (seg.flags.reinitialised || parent->flags.reinitialised) seg.kinematic_heading->reset();
-      heading = seg.kinematic_heading->update(parent_q_segment, child_q_segment, seg.timestamp_ns);
-      // A rotation about the earth's vertical: the same for the sensor and the segment frame.
-      child_q = seg.kinematic_heading->correct(child_q);
-      child_q_segment = seg.kinematic_heading->correct(child_q_segment);
-    }
-    const Quat relative = canonical(relative_orientation(parent_q, child_q));
-    const JointConvention convention = joint_convention(spec);
-    r.joint = JointEstimate{*seg.parent,
-                            r.segment,
-                            relative,
-                            decompose(relative, spec.joint_axes),
-                            convention,
-                            anatomical_angles(relative_orientation(parent_q_segment, child_q_segment), convention),
-                            parent->aligned && seg.aligned,
-                            parent->stale || seg.stale,
-                            parent->flags.initialising || seg.flags.initialising,
-                            heading};
+    r.joint = joint_estimate(r.segment, seg, *parent);
   }
   return r;
+}
+
+JointEstimate BodyFusion::joint_estimate(std::size_t index, Segment& seg, const Segment& parent) {
+  const SegmentSpec& spec = body_.segments[index];
+  // The parent at the child's sample time: its latest orientation turned on by its rate over the lag (one clock).
+  Quat parent_q = *parent.q, parent_q_segment = *parent.q_segment;
+  // Signed (the parent may also be ahead); the modular difference is exact for any lag within the bound.
+  const auto lag_ns = static_cast<std::int64_t>(seg.timestamp_ns - parent.timestamp_ns);
+  const auto max_ns = static_cast<std::int64_t>(max_joint_extrapolation_ns_);
+  if (lag_ns != 0 && lag_ns >= -max_ns && lag_ns <= max_ns) {
+    const double dt = 1e-9 * static_cast<double>(lag_ns);
+    const Quat turned = (parent.q_sensor * exp_rotation_vector(parent.rate * dt)).normalized();
+    parent_q_segment = segment_orientation(turned, parent.sensor_to_segment);
+    parent_q = parent.aligned ? parent_q_segment : turned;
+  }
+  Quat child_q = *seg.q, child_q_segment = *seg.q_segment;
+  std::optional<HingeHeadingEstimator::State> heading;
+  if (seg.kinematic_heading) {
+    // A restarted filter starts a new heading: the offset learnt against the old one no longer holds.
+    if (seg.flags.reinitialised || parent.flags.reinitialised) seg.kinematic_heading->reset();
+    heading = seg.kinematic_heading->update(parent_q_segment, child_q_segment, seg.timestamp_ns);
+    // A rotation about the earth's vertical: the same for the sensor and the segment frame.
+    child_q = seg.kinematic_heading->correct(child_q);
+    child_q_segment = seg.kinematic_heading->correct(child_q_segment);
+  }
+  const Quat relative = canonical(relative_orientation(parent_q, child_q));
+  const JointConvention convention = joint_convention(spec);
+  return JointEstimate{*seg.parent,
+                       index,
+                       relative,
+                       decompose(relative, spec.joint_axes),
+                       convention,
+                       anatomical_angles(relative_orientation(parent_q_segment, child_q_segment), convention),
+                       parent.aligned && seg.aligned,
+                       parent.stale || seg.stale,
+                       parent.flags.initialising || seg.flags.initialising,
+                       heading};
 }
 
 std::optional<std::size_t> BodyFusion::update_calibration(std::string_view node,

@@ -145,6 +145,9 @@ class BodyFusion {
   const std::vector<std::string>& unknown_nodes() const { return unknown_nodes_; }
 
  private:
+  /// The joint of segment `index` (seg, with its parent's latest estimate) at seg's sample time.
+  JointEstimate joint_estimate(std::size_t index, Segment& seg, const Segment& parent);
+
   BodyModel body_;
   std::uint64_t stale_timeout_ns_, discovery_end_ns_, max_joint_extrapolation_ns_;
   std::vector<Segment> segments_;
