@@ -48,7 +48,7 @@ double atan2_over_y(double y, double x) {
 
 }  // namespace
 
-ComplementaryFilter::ComplementaryFilter(const Params& params) : OrientationFilter(kName, params), params_(params) {
+ComplementaryFilter::ComplementaryFilter(const Params& params) : FilterBase(kName, params) {
   state_.rest = RestDetector(params);
   state_.bias_lowpass = GyroBiasLowPass(params);
   state_.mag_detector = MagDisturbanceDetector(params);
@@ -62,7 +62,7 @@ ComplementaryFilter::ComplementaryFilter(const Params& params) : OrientationFilt
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;
   coeff_.bias_lowpass = params.gyro_bias_lowpass != 0.0;
-  initial_ = state_;
+  keep_fresh_state();
 }
 
 UpdateResult ComplementaryFilter::start(const ImuSample& s) {
@@ -143,9 +143,7 @@ UpdateResult ComplementaryFilter::step(const ImuSample& s, double dt) {
   state_.q.coeffs() = q.coeffs() * inverse_sqrt_near_one(q.coeffs().squaredNorm());
 
   if (s.has_gyr && coeff_.bias_lowpass) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
-  state_.flags.resting = state_.rest.update(s);
-  state_.flags.initialising = within_init_period(s.timestamp_ns);
-  return UpdateResult::kUpdated;
+  return updated(s);
 }
 
 std::unique_ptr<OrientationFilter> make_complementary_filter(const FilterSpec& spec) {

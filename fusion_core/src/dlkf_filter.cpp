@@ -141,7 +141,7 @@ Quat DlkfFilter::triad(const Vec3& up, const Vec3& field) {
   return triad_from_unit_up(kalman_support::unit(up), field);
 }
 
-DlkfFilter::DlkfFilter(const Params& params) : OrientationFilter(kName, params), params_(params) {
+DlkfFilter::DlkfFilter(const Params& params) : FilterBase(kName, params) {
   state_.bias_lowpass =
       GyroBiasLowPass({params.bias_corner_frequency_hz, params.bias_omega_min_rad_s, params.bias_min_static_s});
   state_.r_adaption = MagneticRAdaption(params.thresholds());
@@ -157,9 +157,7 @@ DlkfFilter::DlkfFilter(const Params& params) : OrientationFilter(kName, params),
   require_positive(kName, params.sigma_mag_disturbance, "sigma_mag_disturbance");
   require_positive(kName, params.tau_mag_disturbance_s, "tau_mag_disturbance_s");
   require_switch(kName, params.gyro_bias_lowpass, "gyro_bias_lowpass");
-  params.RAdaptionFilterParams::check(kName);
-  if (params.max_gap_s > 60.0) throw std::invalid_argument("dlkf: max_gap_s must be <= 60 s");
-  params.RestDetector::Params::check(kName);
+  kalman_support::check_shared_params(kName, params);
   coeff_.var_g = params.sigma_g * params.sigma_g;
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_ext = params.sigma_ext_acc * params.sigma_ext_acc;
@@ -172,14 +170,12 @@ DlkfFilter::DlkfFilter(const Params& params) : OrientationFilter(kName, params),
   coeff_.acc_accept_min2 = acc_low * acc_low;
   coeff_.acc_accept_max2 = (kGravity + params.acc_rejection_m_s2) * (kGravity + params.acc_rejection_m_s2);
   state_.rest = RestDetector(params);  // after the checks above, so their errors name the filter
-  initial_ = state_;
+  keep_fresh_state();
 }
-
-void DlkfFilter::clear() { state_ = initial_; }
 
 void DlkfFilter::restart_keeping_bias() {
   const GyroBiasLowPass bias_lowpass = state_.bias_lowpass;
-  state_ = initial_;
+  state_ = fresh_state();
   state_.bias_lowpass = bias_lowpass;
 }
 
@@ -210,7 +206,20 @@ UpdateResult DlkfFilter::start(const ImuSample& s) {
 
 UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
+  const Mat3 turn = predict(s, dt);
+  update_gravity(s, turn);
+  update_magnetic(s, dt, turn);
 
+  // TRIAD, gravity dominant. A degenerate pair (field along gravity, or a vanished vector) keeps the last q.
+  const Vec3 g = state_.gravity.vector();
+  const double g_norm = g.norm();
+  const Vec3 up = g_norm > 0.0 ? Vec3(g * (1.0 / g_norm)) : g;
+  const Vec3 h = state_.magnetic.vector();
+  if (up.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad_from_unit_up(up, h);
+  return updated(s);
+}
+
+Mat3 DlkfFilter::predict(const ImuSample& s, double dt) {
   if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
   // Mean of the previous and the current rate: second-order accurate over the step.
   const Vec3 w_now = s.has_gyr ? Vec3(s.gyr - state_.bias_lowpass.bias()) : Vec3::Zero();
@@ -229,6 +238,10 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
 
   // Filter 1: gravity and external acceleration.
   state_.gravity.predict(turn, gyro_var_dt, state_.decay_ext, coeff_.var_ext);
+  return turn;
+}
+
+void DlkfFilter::update_gravity(const ImuSample& s, const Mat3& turn) {
   // | |acc| - g | <= acc_rejection_m_s2, compared squared (no square root).
   const double acc2 = s.acc.squaredNorm();
   bool sustained = false;  // the low-passed deviation beyond the threshold: strong motion going on
@@ -265,12 +278,15 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
       (params_.acc_rejection_m_s2 == 0.0 || (acc2 >= coeff_.acc_accept_min2 && acc2 <= coeff_.acc_accept_max2))) {
     correct_gravity(s.acc, coeff_.var_a);
   }
+}
 
-  // Filter 2: geomagnetic field and magnetic disturbance. Before the first magnetometer sample it only carries
-  // earth north with the gyro: its covariance is restarted by initialise_magnetic() anyway, so a 6D stream pays
-  // for one rotation, not the 6x6 covariance prediction.
+void DlkfFilter::update_magnetic(const ImuSample& s, double dt, const Mat3& turn) {
+  // Filter 2: geomagnetic field and magnetic disturbance, predicted after the gravity correction has turned it (see
+  // update_gravity). Before the first magnetometer sample it only carries earth north with the gyro: its covariance
+  // is restarted by initialise_magnetic() anyway, so a 6D stream pays for one rotation, not the 6x6 covariance
+  // prediction.
   if (state_.have_mag) {
-    state_.magnetic.predict(turn, gyro_var_dt, state_.decay_dist, coeff_.var_dist);
+    state_.magnetic.predict(turn, coeff_.var_g * dt, state_.decay_dist, coeff_.var_dist);
   } else {
     state_.magnetic.x.head<3>() = turn * state_.magnetic.x.head<3>();
   }
@@ -303,14 +319,6 @@ UpdateResult DlkfFilter::step(const ImuSample& s, double dt) {
   // Both covariances are exactly symmetric by construction: only their variances need clamping.
   kalman_support::clamp_variances(state_.gravity.p, 1e-18, 1e8);
   kalman_support::clamp_variances(state_.magnetic.p, 1e-18, 1e8);
-
-  // TRIAD, gravity dominant. A degenerate pair (field along gravity, or a vanished vector) keeps the last q.
-  const Vec3 h = state_.magnetic.vector();
-  if (up.allFinite() && h.allFinite() && kalman_support::acc_mag_usable(g, h)) state_.q = triad_from_unit_up(up, h);
-
-  state_.flags.resting = state_.rest.update(s);
-  state_.flags.initialising = within_init_period(s.timestamp_ns);
-  return UpdateResult::kUpdated;
 }
 
 std::unique_ptr<OrientationFilter> make_dlkf_filter(const FilterSpec& spec) {

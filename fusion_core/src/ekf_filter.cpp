@@ -69,7 +69,7 @@ Mat34 rotate_to_sensor_jacobian(const Quat& q, const Vec3& v) {
 
 }  // namespace
 
-EkfFilter::EkfFilter(const Params& params) : OrientationFilter(kName, params), params_(params) {
+EkfFilter::EkfFilter(const Params& params) : FilterBase(kName, params) {
   state_.r_adaption = MagneticRAdaption(params.thresholds());
   require_positive(kName, params.sigma_g, "sigma_g");
   require_positive(kName, params.sigma_bg, "sigma_bg");
@@ -79,19 +79,15 @@ EkfFilter::EkfFilter(const Params& params) : OrientationFilter(kName, params), p
     throw std::invalid_argument("ekf: parameter acc_variance_cap must be finite and >= 1");
   }
   require_switch(kName, params.rest_bias_update, "rest_bias_update");
-  params.KalmanInitParams::check(kName);
-  params.RAdaptionFilterParams::check(kName);
-  if (params.max_gap_s > 60.0) throw std::invalid_argument("ekf: max_gap_s must be <= 60 s");
-  params.RestDetector::Params::check(kName);
+  check_kalman_init(kName, params);
+  kalman_support::check_shared_params(kName, params);
   coeff_.var_a = params.sigma_a * params.sigma_a;
   coeff_.var_m = params.sigma_m * params.sigma_m;
   coeff_.var_a_max = params.acc_variance_cap * coeff_.var_a;
   coeff_.var_g_per_s = params.sigma_g * params.sigma_g;
   state_.rest = RestDetector(params);  // after the checks above, so their errors name the filter
-  initial_ = state_;
+  keep_fresh_state();
 }
-
-void EkfFilter::clear() { state_ = initial_; }
 
 EkfFilter::Mat6 EkfFilter::error_covariance() const {
   Eigen::Matrix<double, 6, 7> t = Eigen::Matrix<double, 6, 7>::Zero();
@@ -100,39 +96,22 @@ EkfFilter::Mat6 EkfFilter::error_covariance() const {
   return t * state_.p * t.transpose();
 }
 
-void EkfFilter::set_reference(const Vec3& mag_earth) {
-  state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
-  state_.h_ref_judged = MagneticRAdaption::Reference::of(state_.h_ref, Vec3::UnitZ());
-}
-
 UpdateResult EkfFilter::start(const ImuSample& s) {
   const std::optional<StartOrientation> initial = start_orientation(s);
   if (!initial) return UpdateResult::kRejected;
-  const bool mag_usable = initial->with_mag;
-  const bool restart = initialised();
-  const Vec3 bias = state_.bias;
-  const Mat3 bias_covariance = state_.p.bottomRightCorner<3, 3>();
+  const State before = state_;
   clear();
-  state_.q = initial->q;
-  if (mag_usable) set_reference(state_.q * s.mag);
+  const double gap_s = static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
+  kalman_support::start_with_bias(state_, initialised() ? &before : nullptr, *initial, s,
+                                  params_.sigma_bg * params_.sigma_bg, gap_s,
+                                  params_.init_bias_sigma_rad_s * params_.init_bias_sigma_rad_s);
   const Mat43 x = xi(state_.q);
   const Eigen::Vector4d qv = as_vector(state_.q);
   const double var_att = params_.init_attitude_sigma_rad * params_.init_attitude_sigma_rad;
-  state_.p.setZero();
   state_.p.topLeftCorner<4, 4>() = 0.25 * var_att * x * x.transpose() + kNormDirectionVariance * qv * qv.transpose();
-  const double var_bias = params_.init_bias_sigma_rad_s * params_.init_bias_sigma_rad_s;
-  if (restart) {  // the gap rule: the bias and its covariance are kept
-    state_.bias = bias;
-    state_.p.bottomRightCorner<3, 3>() = bias_covariance;
-    const double gap_s = static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
-    kalman_support::grow_over_gap(state_.p.bottomRightCorner<3, 3>(), params_.sigma_bg * params_.sigma_bg, gap_s,
-                                  var_bias);
-  } else {
-    state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(var_bias);
-  }
   state_.gyr_prev = s.gyr;
   state_.have_gyr_prev = s.has_gyr;
-  state_.flags = start_flags(s.has_mag && !mag_usable);
+  state_.flags = start_flags(s.has_mag && !initial->with_mag);
   return UpdateResult::kInitialised;
 }
 
@@ -240,10 +219,7 @@ EkfFilter::MagnetometerUse EkfFilter::judge_magnetometer(const ImuSample& s, dou
     if (state_.h_ref.isZero()) {
       // Initialised without a magnetometer: the first usable one sets the heading and the reference.
       if (kalman_support::acc_mag_usable(up, s.mag)) {
-        const Vec3 m_earth = state_.q * s.mag;
-        state_.q =
-            (Quat(Eigen::AngleAxisd(std::atan2(m_earth.x(), m_earth.y()), Vec3::UnitZ())) * state_.q).normalized();
-        set_reference(state_.q * s.mag);
+        kalman_support::take_first_heading(state_, s.mag);
         m.to_sensor = state_.q.toRotationMatrix().transpose();
         up = m.to_sensor.col(2);
       } else {

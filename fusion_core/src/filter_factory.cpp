@@ -31,7 +31,7 @@ constexpr FilterInfo kFilters[] = {
 
 }  // namespace
 
-OrientationFilter::OrientationFilter(std::string_view filter, const FilterTimingParams& timing) {
+OrientationFilter::OrientationFilter(std::string_view filter, const FilterTimingParams& timing) : name_(filter) {
   timing.check(filter);
   max_gap_ns_ = seconds_to_ns(timing.max_gap_s);
   init_period_ns_ = seconds_to_ns(timing.init_period_s);

@@ -32,15 +32,14 @@ const P& checked(const P& p, std::string_view name) {
 }  // namespace
 
 IecfFilter::IecfFilter(const Params& params, bool use_magnetometer)
-    : OrientationFilter(use_magnetometer ? "iecf" : "iecf6", params),
-      params_(checked(params, use_magnetometer ? "iecf" : "iecf6")),
+    : FilterBase(use_magnetometer ? "iecf" : "iecf6", checked(params, use_magnetometer ? "iecf" : "iecf6")),
       use_magnetometer_(use_magnetometer) {
   state_.rest = RestDetector(params);
   state_.bias_lowpass = GyroBiasLowPass(params);
   state_.mag_detector = MagDisturbanceDetector(params);
   // |gain e dt| <= gain (|e_a| + weight |e_m|) dt <= gain (dt + max_gap_s) <= 2 gain max_gap_s (unit crosses).
   coeff_.correction_bounded = 2.0 * std::max(params.gain, params.initial_gain) * params.max_gap_s < 1e149;
-  initial_ = state_;
+  keep_fresh_state();
 }
 
 double IecfFilter::gain_at(double since_init_s) const {
@@ -48,8 +47,6 @@ double IecfFilter::gain_at(double since_init_s) const {
   const double fraction = std::max(0.0, since_init_s) / params_.init_period_s;
   return params_.initial_gain + (params_.gain - params_.initial_gain) * fraction;
 }
-
-void IecfFilter::clear() { state_ = initial_; }
 
 UpdateResult IecfFilter::start(const ImuSample& s) {
   // IECF6 too takes its initial heading from the magnetometer when there is one (Fan's IECF6 "with the
@@ -141,9 +138,7 @@ UpdateResult IecfFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = mag_rejected;
   if (s.has_gyr && params_.gyro_bias_lowpass != 0.0) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
-  state_.flags.resting = state_.rest.update(s);
-  state_.flags.initialising = since_init_ns < init_period_ns();
-  return UpdateResult::kUpdated;
+  return updated(s);
 }
 
 std::unique_ptr<OrientationFilter> make_iecf_filter(const FilterSpec& spec) {

@@ -4,8 +4,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <string_view>
 
 #include "bsn/fusion/imu_sample.hpp"
+#include "bsn/fusion/r_adaption.hpp"
+#include "bsn/fusion/start_orientation.hpp"
 
 namespace bsn::fusion::kalman_support {
 
@@ -17,6 +22,54 @@ using Mat3 = Eigen::Matrix3d;
 template <class Block>
 void grow_over_gap(Block&& p_bias, double walk_var_per_s, double gap_s, double init_var) {
   p_bias.diagonal().array() += std::min(walk_var_per_s * gap_s, init_var);
+}
+
+/// Throws std::invalid_argument naming `filter` for a bad value of the parameter groups the Kalman filters share (the
+/// R-adaption switch, the rest detector) or max_gap_s above 60 s, the longest gap their prediction bridges.
+template <class P>
+void check_shared_params(std::string_view filter, const P& params) {
+  params.RAdaptionFilterParams::check(filter);
+  if (params.max_gap_s > 60.0) {
+    throw std::invalid_argument(std::string(filter) + ": max_gap_s must be <= 60 s");
+  }
+  params.RestDetector::Params::check(filter);
+}
+
+/// The EKF's and the MEKF's earth field reference from a field in the earth frame: only its horizontal magnitude
+/// (along magnetic north, earth y) and its vertical component matter. State has h_ref and h_ref_judged.
+template <class State>
+void set_magnetic_reference(State& state, const Vec3& mag_earth) {
+  state.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
+  state.h_ref_judged = MagneticRAdaption::Reference::of(state.h_ref, Vec3::UnitZ());
+}
+
+/// The first usable magnetometer reading after a start without one: turns the heading so the field points north and
+/// takes it as the reference.
+template <class State>
+void take_first_heading(State& state, const Vec3& mag) {
+  const Vec3 m_earth = state.q * mag;
+  state.q = (Quat(Eigen::AngleAxisd(std::atan2(m_earth.x(), m_earth.y()), Vec3::UnitZ())) * state.q).normalized();
+  set_magnetic_reference(state, state.q * mag);
+}
+
+/// The start the EKF and the MEKF share, on a cleared `state` (q, bias, covariance p whose last three states are the
+/// gyro bias, h_ref): the orientation and the field reference from `initial`, P zero but for the bias block. That is
+/// init_var per axis on the first start; after a gap (`before` is then the state before the clear) the bias and its
+/// covariance block are kept and grow by the walk over the gap (grow_over_gap). The caller sets the attitude block.
+template <class State>
+void start_with_bias(State& state, const State* before, const StartOrientation& initial, const ImuSample& s,
+                     double walk_var_per_s, double gap_s, double init_var) {
+  state.q = initial.q;
+  if (initial.with_mag) set_magnetic_reference(state, state.q * s.mag);
+  state.p.setZero();
+  auto p_bias = state.p.template bottomRightCorner<3, 3>();
+  if (before) {  // the gap rule: the bias and its covariance are kept
+    state.bias = before->bias;
+    p_bias = before->p.template bottomRightCorner<3, 3>();
+    grow_over_gap(p_bias, walk_var_per_s, gap_s, init_var);
+  } else {
+    p_bias.diagonal().setConstant(init_var);
+  }
 }
 
 /// v / |v| as one division and a multiplication per component (Eigen's normalized() divides each component);

@@ -25,8 +25,8 @@ const P& checked(const P& p, std::string_view name) {
 }  // namespace
 
 MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
-    : OrientationFilter(use_magnetometer ? "madgwick" : "madgwick6", params),
-      params_(checked(params, use_magnetometer ? "madgwick" : "madgwick6")),
+    : FilterBase(use_magnetometer ? "madgwick" : "madgwick6",
+                 checked(params, use_magnetometer ? "madgwick" : "madgwick6")),
       use_magnetometer_(use_magnetometer) {
   state_.rest = RestDetector(params);
   // Fan's plain low-pass, without the running mean of the first still time: madgwick has no other bound on its
@@ -35,7 +35,7 @@ MadgwickFilter::MadgwickFilter(const Params& params, bool use_magnetometer)
   // took its inclination above the gyro's own integral (seed 12: 10.16 against 9.80 deg; 9.36 with the plain one).
   state_.bias_lowpass = GyroBiasLowPass(params, false);
   coeff_.bias_lowpass = params.gyro_bias_lowpass != 0.0;
-  initial_ = state_;
+  keep_fresh_state();
 }
 
 // R(q)^T d for a unit q = (w, x, y, z) in the paper's form (diagonal terms 1 - 2(..)), and its Jacobian as the
@@ -75,8 +75,6 @@ Eigen::Vector4d MadgwickFilter::gradient(const Quat& q, const Vec3& acc_unit, co
   }
   return grad;
 }
-
-void MadgwickFilter::clear() { state_ = initial_; }
 
 UpdateResult MadgwickFilter::start(const ImuSample& s) {
   // The 6D variant too takes its initial heading from the magnetometer when there is one (an absolute start,
@@ -185,9 +183,7 @@ UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = use_magnetometer_ && s.has_mag && !with_mag;
   if (s.has_gyr && coeff_.bias_lowpass) state_.bias_lowpass.update(s.timestamp_ns, dt, s.gyr);
-  state_.flags.resting = state_.rest.update(s);
-  state_.flags.initialising = within_init_period(s.timestamp_ns);
-  return UpdateResult::kUpdated;
+  return updated(s);
 }
 
 std::unique_ptr<OrientationFilter> make_madgwick_filter(const FilterSpec& spec) {

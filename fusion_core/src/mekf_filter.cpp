@@ -165,7 +165,7 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg) {
 }  // namespace mekf
 
 MekfFilter::MekfFilter(const Params& params, bool adaptive)
-    : OrientationFilter(adaptive ? "mekf_adaptive" : "mekf", params), params_(params), adaptive_(adaptive) {
+    : FilterBase(adaptive ? "mekf_adaptive" : "mekf", params), adaptive_(adaptive) {
   state_.r_adaption = MagneticRAdaption(params.thresholds());
   const std::string_view n = adaptive ? "mekf_adaptive" : "mekf";
   coeff_.start_intensity = preset_index(n, params.preset);
@@ -193,9 +193,8 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
       *targets[i] = overrides[i];
     }
   }
-  params.KalmanInitParams::check(n);
-  params.RAdaptionFilterParams::check(n);
-  params.RestDetector::Params::check(n);
+  check_kalman_init(n, params);
+  kalman_support::check_shared_params(n, params);
   require_positive(n, params.static_gyr_rad_s, "static_gyr_rad_s");
   require_positive(n, params.static_acc_m_s2, "static_acc_m_s2");
   require_positive(n, params.slow_gyr_rad_s, "slow_gyr_rad_s");
@@ -213,53 +212,32 @@ MekfFilter::MekfFilter(const Params& params, bool adaptive)
         params.static_acc_m_s2 < params.slow_acc_m_s2 && params.slow_acc_m_s2 < params.intermediate_acc_m_s2)) {
     throw std::invalid_argument(std::string(n) + ": intensity thresholds must increase static < slow < intermediate");
   }
-  if (params.max_gap_s > 60.0) throw std::invalid_argument(std::string(n) + ": max_gap_s must be <= 60 s");
   coeff_.intensity_hold_ns = seconds_to_ns(params.intensity_hold_s);
   coeff_.min_switch_interval_ns = seconds_to_ns(params.min_switch_interval_s);
   coeff_.switch_confirm_ns = seconds_to_ns(params.switch_confirm_s);
   coeff_.bias_cap_time_s = std::max(params.min_switch_interval_s, 1.0);
   state_.intensity = coeff_.start_intensity;
   state_.rest = RestDetector(params);  // after the checks above, so their errors name the filter
-  initial_ = state_;
+  keep_fresh_state();
 }
-
-void MekfFilter::clear() { state_ = initial_; }
 
 MekfNoise MekfFilter::noise() const {
   return adaptive_ ? coeff_.sets[static_cast<std::size_t>(state_.intensity)] : coeff_.noise;
 }
 
-void MekfFilter::set_reference(const Vec3& mag_earth) {
-  // Only the horizontal magnitude and the vertical component matter: the reference points to magnetic north.
-  state_.h_ref = Vec3(0.0, std::hypot(mag_earth.x(), mag_earth.y()), mag_earth.z());
-  state_.h_ref_judged = MagneticRAdaption::Reference::of(state_.h_ref, Vec3::UnitZ());
-}
-
 UpdateResult MekfFilter::start(const ImuSample& s) {
   const std::optional<StartOrientation> initial = start_orientation(s);
   if (!initial) return UpdateResult::kRejected;
-  const bool mag_usable = initial->with_mag;
-  const bool restart = initialised();
-  const Vec3 bias = state_.bias;
-  const Mat3 bias_covariance = state_.p.bottomRightCorner<3, 3>();
+  const State before = state_;
   const double walk_var_per_s = noise().sigma_bg * noise().sigma_bg;  // of the set in use before the gap
   clear();
-  state_.q = initial->q;
-  if (mag_usable) set_reference(state_.q * s.mag);
-  state_.p.setZero();
+  const double gap_s = static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
+  kalman_support::start_with_bias(state_, initialised() ? &before : nullptr, *initial, s, walk_var_per_s, gap_s,
+                                  params_.init_bias_sigma_rad_s * params_.init_bias_sigma_rad_s);
   state_.p.topLeftCorner<3, 3>().diagonal().setConstant(params_.init_attitude_sigma_rad *
                                                         params_.init_attitude_sigma_rad);
-  const double var_bias = params_.init_bias_sigma_rad_s * params_.init_bias_sigma_rad_s;
-  if (restart) {  // the gap rule: the bias and its covariance are kept
-    state_.bias = bias;
-    state_.p.bottomRightCorner<3, 3>() = bias_covariance;
-    const double gap_s = static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
-    kalman_support::grow_over_gap(state_.p.bottomRightCorner<3, 3>(), walk_var_per_s, gap_s, var_bias);
-  } else {
-    state_.p.bottomRightCorner<3, 3>().diagonal().setConstant(var_bias);
-  }
   state_.last_switch_ns = s.timestamp_ns;
-  state_.flags = start_flags(s.has_mag && !mag_usable);
+  state_.flags = start_flags(s.has_mag && !initial->with_mag);
   return UpdateResult::kInitialised;
 }
 
@@ -347,7 +325,7 @@ void MekfFilter::update_accelerometer(const Vec3& acc, const MekfNoise& n, bool 
     // next turn of the sensor makes vertical. So while the magnetometer is rejected the update leaves the heading
     // and the bias alone: their correlations with the tilt are dropped, P <- (I - E) P (I - E) + E P E with E the
     // projector onto the vertical of the attitude error and onto the bias (positive semidefinite by construction,
-    // only less certain, and consistent with what the update then does). BROAD: mekf 3.35 -> 3.15 deg.
+    // only less certain, and consistent with what the update then does).
     const Vec3 u = z_hat * (1.0 / kGravity);
     Eigen::Matrix<double, 6, 6> e = Eigen::Matrix<double, 6, 6>::Zero();
     e.topLeftCorner<3, 3>() = u * u.transpose();
@@ -381,10 +359,7 @@ void MekfFilter::update_magnetometer(const ImuSample& s, const MekfNoise& n, dou
       state_.flags.mag_rejected = true;
       return;
     }
-    const Vec3 m_earth = state_.q * s.mag;
-    const double heading_error = std::atan2(m_earth.x(), m_earth.y());
-    state_.q = (Quat(Eigen::AngleAxisd(heading_error, Vec3::UnitZ())) * state_.q).normalized();
-    set_reference(state_.q * s.mag);
+    kalman_support::take_first_heading(state_, s.mag);
     return;
   }
   const Mat3 to_sensor = state_.q.toRotationMatrix().transpose();

@@ -48,7 +48,7 @@ const P& checked(const P& p, const char* name) {
 // angles of a filter step are small, and this is several times cheaper than atan2. The usual tiny angles take
 // four terms; the rest seven, evaluated in Estrin's scheme (short dependency chains).
 constexpr double kSeriesMaxT2 = 1e-2;
-double atan_over_t(double t2) {
+inline double atan_over_t(double t2) {
   if (t2 < 1e-4) return 1.0 - t2 * (1.0 / 3 - t2 * (1.0 / 5 - t2 * (1.0 / 7)));
   const double t4 = t2 * t2;
   return (1.0 - t2 * (1.0 / 3)) +
@@ -88,8 +88,7 @@ double signed_angle(const Vec3& v, const Vec3& w, const Vec3& n) { return atan2_
 }  // namespace
 
 SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
-    : OrientationFilter(use_magnetometer ? kName : kName6, params),
-      params_(checked(params, use_magnetometer ? kName : kName6)),
+    : FilterBase(use_magnetometer ? kName : kName6, checked(params, use_magnetometer ? kName : kName6)),
       use_magnetometer_(use_magnetometer) {
   state_.rest = RestDetector(params);
   state_.mag_detector = MagDisturbanceDetector(params);
@@ -110,7 +109,7 @@ SeelRuppinFilter::SeelRuppinFilter(const Params& params, bool use_magnetometer)
   coeff_.acc_lowpass_fc_hz =
       coeff_.acc_lowpass ? std::numbers::sqrt2 / (2.0 * std::numbers::pi * params.acc_lowpass_tau_s) : 0.0;
   coeff_.gyro_integral = coeff_.acc_lowpass || (use_magnetometer && state_.mag_offset.enabled());
-  initial_ = state_;
+  keep_fresh_state();
 }
 
 void SeelRuppinFilter::LowPassCache::update(double dt, double fc_hz) {
@@ -133,7 +132,7 @@ void SeelRuppinFilter::LowPassCache::update(double dt, double fc_hz) {
 
 Vec3 SeelRuppinFilter::lowpass_acc(const Vec3& acc, double dt) {
   acc_lp_.update(dt, coeff_.acc_lowpass_fc_hz);
-  const Vec3 x = state_.q_gyr._transformVector(acc);
+  const Vec3 x = rotate(state_.q_gyr, acc);
   if (state_.acc_lp_warmup_s < params_.acc_lowpass_tau_s) {
     // Start-up: for the first tau the output is the running mean of all inputs, and the low-pass is kept in
     // the steady state of that mean. Started from one sample instead, the low-pass would hold that sample's
@@ -143,12 +142,12 @@ Vec3 SeelRuppinFilter::lowpass_acc(const Vec3& acc, double dt) {
     state_.acc_lp_mean += (x - state_.acc_lp_mean) / state_.acc_lp_count;
     state_.acc_lp_y = state_.acc_lp_mean;
     state_.acc_lp_rate = Vec3::Zero();
-    return state_.q_gyr.conjugate()._transformVector(state_.acc_lp_mean);
+    return rotate(state_.q_gyr.conjugate(), state_.acc_lp_mean);
   }
   const Vec3 offset = state_.acc_lp_y - x;
   state_.acc_lp_y = x + acc_lp_.p00 * offset + acc_lp_.p01 * state_.acc_lp_rate;
   state_.acc_lp_rate = acc_lp_.p10 * offset + acc_lp_.p11 * state_.acc_lp_rate;
-  return state_.q_gyr.conjugate()._transformVector(state_.acc_lp_y);
+  return rotate(state_.q_gyr.conjugate(), state_.acc_lp_y);
 }
 
 double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
@@ -158,8 +157,6 @@ double SeelRuppinFilter::GainCache::gain(double dt, double tau_14) {
   }
   return k;
 }
-
-void SeelRuppinFilter::clear() { state_ = initial_; }
 
 UpdateResult SeelRuppinFilter::start(const ImuSample& s) {
   if (!physically_possible(s)) return UpdateResult::kRejected;
@@ -225,7 +222,8 @@ void SeelRuppinFilter::start_mag_reference(std::uint64_t t_ns) {
   state_.mag_norm_sum = state_.mag_dip_sum = state_.mag_learning_count = 0.0;
 }
 
-bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s) {
+bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const Vec3& up, double rate_rad_s,
+                                     double dt) {
   if (state_.mag_learning) {
     // Learn only once the start-up is over: the dip needs a converged vertical.
     if (state_.flags.initialising) return false;
@@ -242,14 +240,15 @@ bool SeelRuppinFilter::mag_disturbed(std::uint64_t t_ns, const Vec3& mag, const 
   }
   // Disturbed readings are skipped, unless the rejection has lasted so long that the detector lets them in with a
   // reduced gain (the heading must not drift for ever).
-  state_.mag_detector.update(t_ns, mag, up, rate_rad_s, static_cast<double>(t_ns - clock().last_ns) * 1e-9);
+  state_.mag_detector.update(t_ns, mag, up, rate_rad_s, dt);
   return !state_.mag_detector.usable();
 }
 
 // Eqs. 11-12 and the magnetometer part of eq. 13: the correction axis is the estimated vertical, so the
 // magnetometer turns the heading only.
-Vec3 SeelRuppinFilter::mag_correction(const ImuSample& s, const Vec3& mag, const Vec3& r_acc, double rate_rad_s) {
-  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, mag, r_acc, rate_rad_s)) {
+Vec3 SeelRuppinFilter::mag_correction(const ImuSample& s, const Vec3& mag, const Vec3& r_acc, double rate_rad_s,
+                                      double dt) {
+  if (params_.mag_rejection != 0.0 && mag_disturbed(s.timestamp_ns, mag, r_acc, rate_rad_s, dt)) {
     state_.flags.mag_rejected = true;
     return Vec3::Zero();
   }
@@ -263,9 +262,8 @@ Vec3 SeelRuppinFilter::mag_correction(const ImuSample& s, const Vec3& mag, const
   // The gain uses the time since the last used magnetometer reading, so tau_mag holds in seconds even when the
   // magnetometer is slower than the IMU.
   const std::uint64_t since_mag = s.timestamp_ns - state_.last_mag_ns;
-  const double dt_mag = (state_.last_mag_ns != 0 && since_mag <= max_gap_ns())
-                            ? static_cast<double>(since_mag) * 1e-9
-                            : static_cast<double>(s.timestamp_ns - clock().last_ns) * 1e-9;
+  const double dt_mag =
+      (state_.last_mag_ns != 0 && since_mag <= max_gap_ns()) ? static_cast<double>(since_mag) * 1e-9 : dt;
   // During the start-up the heading converges as fast as the tilt: an initial heading taken with a wrong
   // vertical (a start in motion) is wrong too.
   const double k_full = !state_.heading_known       ? 1.0
@@ -309,20 +307,22 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
         // The fit's earth field is the detector's reference from now on: with the offset removed the readings show
         // it, whether the offset was there from the start (the reference held it) or came later (a magnet attached).
         const Vec3& h = state_.mag_offset.field_inertial();
-        const Vec3 up_inertial = state_.q_gyr._transformVector(r_acc);
+        const Vec3 up_inertial = rotate(state_.q_gyr, r_acc);
         state_.mag_detector.set_reference(h.norm(), MagDisturbanceDetector::dip_angle(h, up_inertial),
                                           params_.mag_reference_s);
       }
       mag -= state_.mag_offset.offset();
     }
-    correction += mag_correction(s, mag, r_acc, rate.cross(r_acc).norm());
+    correction += mag_correction(s, mag, r_acc, rate.cross(r_acc).norm(), dt);
   }
   state_.q = state_.q * exp_rotation_vector(correction);  // eqs. 10 and 12
   state_.q = renormalised(state_.q);
   const double max_bias = params_.max_gyro_bias_rad_s;
   state_.gyro_bias = state_.gyro_bias.cwiseMax(-max_bias).cwiseMin(max_bias);
 
-  if (!state_.q.coeffs().allFinite() || !state_.gyro_bias.allFinite()) {
+  // q is unit and the bias clamped: their sum is finite exactly when every component is.
+  const Vec3& b = state_.gyro_bias;
+  if (!std::isfinite(state_.q.w() + state_.q.x() + state_.q.y() + state_.q.z() + b.x() + b.y() + b.z())) {
     // Cannot happen with physically possible input (every quantity stays bounded); should it ever, start
     // afresh rather than pass NaN downstream.
     reset();
@@ -339,7 +339,7 @@ UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
 }
 
 std::unique_ptr<OrientationFilter> make_seel_ruppin_filter(const FilterSpec& spec) {
-  return std::make_unique<SeelRuppinFilter>(bind_parameters(kName, spec, kParams));
+  return std::make_unique<SeelRuppinFilter>(bind_parameters(kName, spec, kParams), true);
 }
 
 std::unique_ptr<OrientationFilter> make_seel_ruppin6_filter(const FilterSpec& spec) {

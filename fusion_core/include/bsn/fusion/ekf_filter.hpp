@@ -25,51 +25,54 @@
 
 namespace bsn::fusion {
 
-class EkfFilter final : public OrientationFilter {
- public:
-  using Mat7 = Eigen::Matrix<double, 7, 7>;
-  using Mat6 = Eigen::Matrix<double, 6, 6>;
+namespace ekf {
+using Mat7 = Eigen::Matrix<double, 7, 7>;
+}  // namespace ekf
 
-  /// Own fields below; initial covariance, R-adaption, rest flag and timing come from the base structs (documented
-  /// there). max_gap_s must be <= 60 s. A restart after a gap keeps the bias and its covariance block (see
-  /// kalman_support::grow_over_gap).
-  struct Params : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
-    /// Gyro white noise, rad/s per sqrt(Hz): the rotation-angle variance grows by sigma_g^2 * dt per step.
-    /// Default 1e-3 (Nez Table 3, slow).
-    double sigma_g = 1e-3;
-    /// Gyro bias random walk, rad/s per sqrt(s). Default 1e-4 (Nez Table 3, slow).
-    double sigma_bg = 1e-4;
-    /// Accelerometer measurement noise (including external acceleration), m/s^2. Default 2: on the eight BROAD
-    /// trials 2 / 10 (sigma_a / sigma_m) gave a mean total RMSE of 2.9 deg, Nez's slow set 0.2 / 1.5 gave 5.4
-    /// deg (without R-adaption) because external acceleration and small disturbances are far above sensor noise.
-    double sigma_a = 2.0;
-    /// Magnetometer measurement noise (including small disturbances), uT. Default 10 (see sigma_a).
-    double sigma_m = 10.0;
-    /// The accelerometer variance of a sample is sigma_a^2 + |r|^2, r = acc - R(q)^T g its residual, but at most
-    /// this factor times sigma_a^2; 1 = sigma_a^2 always (Fan's fixed R). An external acceleration is not white
-    /// noise of sigma_a: the residual shows about how large it is, and a sample that carries more is trusted less
-    /// (simulated translation at 1 g with a consumer MEMS part, test_clean_field_motion, where the tilt swung by 3-7
-    /// deg during each move: heading 2.2 -> 1.5 deg RMS). The cap keeps the filter from going blind for as long as
-    /// the body moves: shaking that averages out, like BROAD's fast translation with up to 9 g for 100 s, is
-    /// filtered well by the fixed R, and uncapped the tilt and, through the joint update, the heading drifted there
-    /// (1.45 -> 12.4 deg on that trial). Default 2 (sigma at most x1.4). Eight BROAD trials, mean total RMSE: 1 (off)
-    /// 2.40 deg, 2 2.42, 4 2.44, 6 2.45, 10 2.46, uncapped 3.90; the simulated case, mean of seeds 13-18: 2.20,
-    /// 1.54, 1.11, 0.97, 0.88, 0.84 deg RMS heading (a fixed sigma_a of 4: 2.50 deg on BROAD, 1.97 simulated).
-    double acc_variance_cap = 2.0;
-    /// 1 = while the rest detector reports rest (state_.rest* parameters), the raw gyro reading is a measurement of the
-    /// bias on all three axes (the true rate is zero; earth rotation, 0.004 deg/s, is far below a MEMS bias): a
-    /// zero-rate update with the filter's own gyro noise per sample, sigma_g^2 / dt, as its variance. 0 = Fan's
-    /// filter, which sees the bias only through the accelerometer and the magnetometer. Without it the bias along the
-    /// vertical is learned only through the magnetometer: with that rejected from the start, its variance stays at
-    /// init_bias_sigma_rad_s through the rest, and once the body moves and tilts the accelerometer's residual under
-    /// external acceleration pulls it (simulated translation at 1 g with the magnetometer rejected throughout,
-    /// test_clean_field_motion, seed 15: sensor-z bias 0 -> -0.44 deg/s within 4 s of motion against a true +0.2,
-    /// heading error 32 deg against 13 deg of gyro-only drift; with it, seeds 13-18: max heading error 0.9-2.4 deg).
-    /// With the magnetometer in use it also removes the vertical bias before the motion starts (same case, RMS
-    /// heading, mean of seeds 13-18: 1.54 -> 0.76 deg). Default 1 (eight BROAD trials, mean total RMSE 2.42 -> 2.42
-    /// deg).
-    double rest_bias_update = 1.0;
-  };
+/// The EKF's parameters: own fields below; initial covariance, R-adaption, rest flag and timing come from the base
+/// structs (documented there). max_gap_s must be <= 60 s. A restart after a gap keeps the bias and its covariance block
+/// (see kalman_support::grow_over_gap).
+struct EkfParams : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
+  /// Gyro white noise, rad/s per sqrt(Hz): the rotation-angle variance grows by sigma_g^2 * dt per step.
+  /// Default 1e-3 (Nez Table 3, slow).
+  double sigma_g = 1e-3;
+  /// Gyro bias random walk, rad/s per sqrt(s). Default 1e-4 (Nez Table 3, slow).
+  double sigma_bg = 1e-4;
+  /// Accelerometer measurement noise (including external acceleration), m/s^2. Default 2: external accelerations
+  /// and small disturbances in human motion are far above sensor noise (Nez's slow set, 0.2, is too stiff for them).
+  double sigma_a = 2.0;
+  /// Magnetometer measurement noise (including small disturbances), uT. Default 10 (see sigma_a).
+  double sigma_m = 10.0;
+  /// The accelerometer variance of a sample is sigma_a^2 + |r|^2, r = acc - R(q)^T g its residual, but at most this
+  /// factor times sigma_a^2; 1 = sigma_a^2 always (Fan's fixed R). Default 2 (sigma at most x1.4): a sample that
+  /// carries a large external acceleration is trusted less, while the cap keeps the filter from going blind through
+  /// a long shaking motion that averages out.
+  double acc_variance_cap = 2.0;
+  /// 1 = while the rest detector reports rest (rest_* parameters), the raw gyro reading measures the bias on all
+  /// three axes (the true rate is zero): a zero-rate update with the gyro noise per sample, sigma_g^2 / dt, as its
+  /// variance; 0 = Fan's filter. Default 1: otherwise the bias along the vertical is observed only through the
+  /// magnetometer, and with that rejected external accelerations pull it once the body moves.
+  double rest_bias_update = 1.0;
+};
+
+/// Everything the EKF keeps between samples.
+struct EkfState {
+  Quat q = Quat::Identity();                  ///< sensor-to-earth
+  Vec3 bias = Vec3::Zero();                   ///< gyro bias, sensor frame, rad/s
+  ekf::Mat7 p = ekf::Mat7::Identity();        ///< covariance of [q (w, x, y, z), b (rad/s)]
+  Vec3 h_ref = Vec3::Zero();                  ///< predefined earth field (ENU), uT; zero = not known yet
+  MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
+  Vec3 gyr_prev = Vec3::Zero();               ///< raw gyro reading of the previous sample, rad/s
+  bool have_gyr_prev = false;
+  RestDetector rest;             ///< still-sensor detection (flags().resting, the bias updates' gate)
+  MagneticRAdaption r_adaption;  ///< magnetometer variance by its disturbance
+  FilterFlags flags;
+};
+
+class EkfFilter final : public FilterBase<EkfParams, EkfState> {
+ public:
+  using Mat7 = ekf::Mat7;
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
 
   struct Coefficients {
     double var_a = 0.0;        ///< sigma_a^2
@@ -78,43 +81,18 @@ class EkfFilter final : public OrientationFilter {
     double var_g_per_s = 0.0;  ///< sigma_g^2: a gyro reading's variance is this / dt
   };
 
-  struct State {
-    Quat q = Quat::Identity();                  ///< sensor-to-earth
-    Vec3 bias = Vec3::Zero();                   ///< gyro bias, sensor frame, rad/s
-    Mat7 p = Mat7::Identity();                  ///< covariance of [q (w, x, y, z), b (rad/s)]
-    Vec3 h_ref = Vec3::Zero();                  ///< predefined earth field (ENU), uT; zero = not known yet
-    MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
-    Vec3 gyr_prev = Vec3::Zero();               ///< raw gyro reading of the previous sample, rad/s
-    bool have_gyr_prev = false;
-    RestDetector rest;             ///< still-sensor detection (flags().resting, the bias updates' gate)
-    MagneticRAdaption r_adaption;  ///< magnetometer variance by its disturbance
-    FilterFlags flags;
-  };
-
   explicit EkfFilter(const Params& params);
   EkfFilter() : EkfFilter(Params{}) {}
-
-  Quat orientation() const override { return state_.q; }
-  FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return state_.bias; }
-  std::string_view name() const override { return "ekf"; }
 
   /// The filter's own 7x7 covariance of [q, b].
   const Mat7& covariance() const { return state_.p; }
   /// The same uncertainty as a 6x6 covariance of [dtheta (sensor-frame rotation vector, rad), db (rad/s)], with
   /// q_true = q * exp(dtheta): dtheta = 2 Xi(q)^T dq.
   Mat6 error_covariance() const;
-  const Params& params() const { return params_; }
-  const State& state() const { return state_; }
-  /// Continues from a state() of a filter with the same parameters.
-  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
-  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
-  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
-  void clear() override;
   /// What judge_magnetometer() decided for the sample, and the earth-to-sensor rotation after it (which may have
   /// set the heading).
   struct MagnetometerUse {
@@ -128,7 +106,6 @@ class EkfFilter final : public OrientationFilter {
   MagnetometerUse judge_magnetometer(const ImuSample& s, double dt);
   void update_accelerometer_and_magnetometer(const ImuSample& s, const MagnetometerUse& mag);
   void project_covariance_to_unit_norm();
-  void set_reference(const Vec3& mag_earth);
   /// The zero-rate update of rest_bias_update, out of line: it runs at rest only, and inlined into step() it costs
   /// the update in motion instructions (ekf: +1.3 %).
   [[gnu::noinline]] void learn_bias_at_rest(const Vec3& gyr, double dt);
@@ -139,10 +116,7 @@ class EkfFilter final : public OrientationFilter {
   void correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
                const Eigen::Matrix<double, M, 1>& variances, bool hold_bias = false);
 
-  Params params_;
   Coefficients coeff_;
-  State state_;
-  State initial_;  ///< a fresh filter's (reset())
 };
 
 std::unique_ptr<OrientationFilter> make_ekf_filter(const FilterSpec& spec);

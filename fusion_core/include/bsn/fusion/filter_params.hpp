@@ -79,6 +79,12 @@ inline void require_non_negative(std::string_view filter, double value, const ch
   }
 }
 
+/// Throws std::invalid_argument, naming `owner`, unless every field of `params` that `fields` lists is finite and > 0.
+template <class P, std::size_t N>
+void require_positive_fields(std::string_view owner, const P& params, const std::array<ParamField<P>, N>& fields) {
+  for (const auto& f : fields) require_positive(owner, params.*(f.field), f.name);
+}
+
 /// Re-initialisation and start-up timing, the same in every filter; each filter's Params derives from it, so the
 /// field names are the parameter names (timing_param_fields() lists them).
 struct FilterTimingParams {
@@ -90,16 +96,17 @@ struct FilterTimingParams {
   double init_period_s = 3.0;
 
   /// Throws std::invalid_argument, naming `owner`, unless both are finite and > 0.
-  void check(std::string_view owner) const {
-    require_positive(owner, max_gap_s, "max_gap_s");
-    require_positive(owner, init_period_s, "init_period_s");
-  }
+  void check(std::string_view owner) const;
 };
 
 /// The timing parameters' entries of a filter's parameter table (P derives from FilterTimingParams).
 template <class P>
 constexpr std::array<ParamField<P>, 2> timing_param_fields() {
   return {{{"max_gap_s", &P::max_gap_s}, {"init_period_s", &P::init_period_s}}};
+}
+
+inline void FilterTimingParams::check(std::string_view owner) const {
+  require_positive_fields(owner, *this, timing_param_fields<FilterTimingParams>());
 }
 
 }  // namespace bsn::fusion

@@ -21,38 +21,38 @@
 
 namespace bsn::fusion {
 
-class IecfFilter final : public OrientationFilter {
- public:
-  /// Own fields below; the shared groups come from the base structs (documented there). init_period_s is also the
-  /// length of the start-up gain ramp.
-  struct Params : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
-    /// K: gain on the error after start-up, rad/s per unit error; the correction time constant is 1/K.
-    /// Default 0.1 (10 s): the BROAD optimum (0.07-0.1 within 0.04 deg; Fan's 0.5 gives 4.4 deg instead of
-    /// 3.1 deg mean total RMSE).
-    double gain = 0.1;
-    /// Gain right after (re)initialisation, ramping down to `gain` over init_period_s. Default 10.
-    double initial_gain = 10.0;
-    /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
-    double gyro_bias_lowpass = 1.0;
-    /// 1 = skip the magnetometer while the disturbance detector flags it, 0 = always use it. Default 1.
-    double mag_rejection = 1.0;
-  };
+/// The IECF's parameters: own fields below, the shared groups from the base structs (documented there).
+/// init_period_s is also the length of the start-up gain ramp.
+struct IecfParams : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
+  /// K: gain on the error after start-up, rad/s per unit error; the correction time constant is 1/K. Default 0.1
+  /// (10 s), the optimum on the eight BROAD trials; Fan et al.'s 0.5 suits their sensors.
+  double gain = 0.1;
+  /// Gain right after (re)initialisation, ramping down to `gain` over init_period_s. Default 10.
+  double initial_gain = 10.0;
+  /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
+  double gyro_bias_lowpass = 1.0;
+  /// 1 = skip the magnetometer while the disturbance detector flags it, 0 = always use it. Default 1.
+  double mag_rejection = 1.0;
+};
 
+/// Everything an IECF keeps between samples.
+struct IecfState {
+  Quat q = Quat::Identity();            ///< sensor-to-earth
+  bool heading_known = false;           ///< false after an initialisation without magnetometer
+  std::uint64_t last_mag_ns = 0;        ///< last used magnetometer reading
+  RestDetector rest;                    ///< still-sensor detection (flags().resting, the bias updates' gate)
+  GyroBiasLowPass bias_lowpass;         ///< the gyro bias estimate at rest
+  MagDisturbanceDetector mag_detector;  ///< magnetometer rejection
+  FilterFlags flags;
+};
+
+class IecfFilter final : public FilterBase<IecfParams, IecfState> {
+ public:
   /// Quantities derived once from Params.
   struct Coefficients {
     /// The correction gain * e * dt stays below 1e150 rad per step: with a gyro step below that too, the update
     /// cannot overflow, and the detector need not be saved for a rollback.
     bool correction_bounded = true;
-  };
-
-  struct State {
-    Quat q = Quat::Identity();            ///< sensor-to-earth
-    bool heading_known = false;           ///< false after an initialisation without magnetometer
-    std::uint64_t last_mag_ns = 0;        ///< last used magnetometer reading
-    RestDetector rest;                    ///< still-sensor detection (flags().resting, the bias updates' gate)
-    GyroBiasLowPass bias_lowpass;         ///< the gyro bias estimate at rest
-    MagDisturbanceDetector mag_detector;  ///< magnetometer rejection
-    FilterFlags flags;
   };
 
   /// Throws std::invalid_argument on an out-of-range parameter.
@@ -62,28 +62,12 @@ class IecfFilter final : public OrientationFilter {
   /// Gain K at time since_init_s after (re)initialisation (the start-up ramp).
   double gain_at(double since_init_s) const;
 
-  Quat orientation() const override { return state_.q; }
-  FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return state_.bias_lowpass.bias(); }
-  std::string_view name() const override { return use_magnetometer_ ? "iecf" : "iecf6"; }
-
-  const Params& params() const { return params_; }
-  const State& state() const { return state_; }
-  /// Continues from a state() of a filter with the same parameters.
-  void set_state(const State& state) { state_ = state; }
-
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
-  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
-  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
-  void clear() override;
 
-  Params params_;
   bool use_magnetometer_;
   Coefficients coeff_;
-  State state_;
-  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "iecf" (9D) and "iecf6" (6D), with the Params fields as parameter names.

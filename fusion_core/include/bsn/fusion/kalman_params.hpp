@@ -17,12 +17,6 @@ struct KalmanInitParams {
   /// Initial standard deviation of each gyro bias component, rad/s. Default 0.01 rad/s (0.57 deg/s), a
   /// typical turn-on bias of a calibrated MEMS gyro.
   double init_bias_sigma_rad_s = 0.01;
-
-  /// Throws std::invalid_argument, naming `owner`, unless both are finite and > 0.
-  void check(std::string_view owner) const {
-    require_positive(owner, init_attitude_sigma_rad, "init_attitude_sigma_rad");
-    require_positive(owner, init_bias_sigma_rad_s, "init_bias_sigma_rad_s");
-  }
 };
 
 /// The initial covariance's entries of a filter's parameter table (P derives from KalmanInitParams).
@@ -30,6 +24,11 @@ template <class P>
 constexpr std::array<ParamField<P>, 2> kalman_init_param_fields() {
   return {
       {{"init_attitude_sigma_rad", &P::init_attitude_sigma_rad}, {"init_bias_sigma_rad_s", &P::init_bias_sigma_rad_s}}};
+}
+
+/// Throws std::invalid_argument, naming `owner`, unless both initial sigmas are finite and > 0.
+inline void check_kalman_init(std::string_view owner, const KalmanInitParams& params) {
+  require_positive_fields(owner, params, kalman_init_param_fields<KalmanInitParams>());
 }
 
 }  // namespace bsn::fusion

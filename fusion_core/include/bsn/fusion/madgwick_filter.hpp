@@ -25,33 +25,34 @@
 
 namespace bsn::fusion {
 
-class MadgwickFilter final : public OrientationFilter {
- public:
-  /// Own fields below; the shared groups come from the base structs (documented there). Between readings of a
-  /// magnetometer slower than the IMU, the 9D step uses the last reading turned by the gyro since then, for at most
-  /// max_gap_s, so the heading gain does not drop with the magnetometer rate.
-  struct Params : GyroBiasLowPass::Params, RestDetector::Params, FilterTimingParams {
-    /// beta: magnitude of the gradient-descent step, rad/s (the quaternion rate of the correction; the
-    /// orientation turns at up to 2 beta rad/s towards the measurements). Default 0.02: the BROAD optimum
-    /// (flat from 0.015 to 0.02; Fan's 0.1 gives 4.5 deg instead of 3.2 deg mean total RMSE).
-    double beta = 0.02;
-    /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
-    double gyro_bias_lowpass = 1.0;
-  };
+/// The GDA's parameters: own fields below; the shared groups come from the base structs (documented there). Between
+/// readings of a magnetometer slower than the IMU, the 9D step uses the last reading turned by the gyro since then, for
+/// at most max_gap_s, so the heading gain does not drop with the magnetometer rate.
+struct MadgwickParams : GyroBiasLowPass::Params, RestDetector::Params, FilterTimingParams {
+  /// beta: magnitude of the gradient-descent step, rad/s (the quaternion rate of the correction; the orientation
+  /// turns at up to 2 beta rad/s towards the measurements). Default 0.02, the optimum on the eight BROAD trials;
+  /// Madgwick's and Fan et al.'s 0.1 suits their sensors.
+  double beta = 0.02;
+  /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
+  double gyro_bias_lowpass = 1.0;
+};
 
+/// Everything the GDA keeps between samples.
+struct MadgwickState {
+  Quat q = Quat::Identity();      ///< sensor-to-earth
+  Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, uT; turned into the current sensor frame
+                                  ///< while a sample without magnetometer uses it
+  std::uint64_t held_mag_ns = 0;  ///< its timestamp; 0 = none
+  RestDetector rest;              ///< still-sensor detection (flags().resting, the bias updates' gate)
+  GyroBiasLowPass bias_lowpass;   ///< the gyro bias estimate at rest
+  FilterFlags flags;
+};
+
+class MadgwickFilter final : public FilterBase<MadgwickParams, MadgwickState> {
+ public:
   /// Quantities derived once from Params.
   struct Coefficients {
     bool bias_lowpass = true;  ///< gyro_bias_lowpass = 1
-  };
-
-  struct State {
-    Quat q = Quat::Identity();      ///< sensor-to-earth
-    Vec3 held_mag = Vec3::Zero();   ///< last usable magnetometer reading, uT; turned into the current sensor frame
-                                    ///< while a sample without magnetometer uses it
-    std::uint64_t held_mag_ns = 0;  ///< its timestamp; 0 = none
-    RestDetector rest;              ///< still-sensor detection (flags().resting, the bias updates' gate)
-    GyroBiasLowPass bias_lowpass;   ///< the gyro bias estimate at rest
-    FilterFlags flags;
   };
 
   using Jacobian = Eigen::Matrix<double, 3, 4>;  ///< d f / d (w, x, y, z)
@@ -69,28 +70,12 @@ class MadgwickFilter final : public OrientationFilter {
   /// Gradient J^T f of the (6D or 9D) objective, as (w, x, y, z); mag_unit ignored when use_mag is false.
   static Eigen::Vector4d gradient(const Quat& q, const Vec3& acc_unit, const Vec3& mag_unit, bool use_mag);
 
-  Quat orientation() const override { return state_.q; }
-  FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return state_.bias_lowpass.bias(); }
-  std::string_view name() const override { return use_magnetometer_ ? "madgwick" : "madgwick6"; }
-
-  const Params& params() const { return params_; }
-  const State& state() const { return state_; }
-  /// Continues from a state() of a filter with the same parameters.
-  void set_state(const State& state) { state_ = state; }
-
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
-  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
-  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
-  void clear() override;
 
-  Params params_;
   bool use_magnetometer_;
   Coefficients coeff_;
-  State state_;
-  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "madgwick" (9D) and "madgwick6" (6D), with the Params fields as parameter names.

@@ -92,11 +92,9 @@ class MagDisturbanceDetector {
     /// Clean again only below this fraction (<= mag_norm_enter). Default 0.07: above what a clean BROAD field
     /// shows on most samples (90th percentile 3-6 %), so a disturbance that has gone is trusted again.
     double mag_norm_leave = 0.07;
-    /// Disturbed when |dip_lp - ref_dip| exceeds this, rad. Default 0.105 rad (6 deg): Fan's test B magnet turns the
-    /// dip by 7.4 deg while |m| changes by only 7.6 %, so the dip is what catches it; 6 deg stays above the clean
-    /// BROAD trials (99th percentile 3-5 deg with the filter's own vertical) and below B's 7.4 deg by five times the
-    /// noise of the low-passed dip of a consumer part (0.3 deg). Simulated over 5 noise seeds of Fan B-E: >= 80 %
-    /// caught on each.
+    /// Disturbed when |dip_lp - ref_dip| exceeds this, rad. Default 0.105 rad (6 deg): above the dip's spread in a
+    /// clean field with the filter's own vertical, below the 7.4 deg by which Fan et al.'s test B magnet turns it
+    /// (while |m| changes by only 7.6 %, so the dip is what catches it).
     double mag_dip_enter_rad = 0.105;
     /// Clean again only below this, rad (<= mag_dip_enter_rad). Default 0.07 rad (4 deg).
     double mag_dip_leave_rad = 0.07;
@@ -110,23 +108,18 @@ class MagDisturbanceDetector {
     /// The reference follows the clean low-passed field with this time constant, s (a running mean until then).
     /// Default 20 s (VQF's magRefTau): long against any disturbance that should be caught, short against a session.
     double mag_reference_tau_s = 20.0;
-    /// The magnetometer's own delay behind the gyro beyond one sample, s: the dip test tolerates a lag of one
-    /// sample interval (a reading taken just before the gyro's) plus this, i.e. both dip thresholds widen by
-    /// |w_h| (dt + mag_latency_s). Default 0.0064 s: the group delay 1 / (2 pi f_c) of a magnetometer averaging
-    /// with a first-order corner f_c = 25 Hz (a part sampled at 100 Hz averages well below its 50 Hz Nyquist
-    /// limit). The simulated case (1000 deg/s, one sample of lag, 25 Hz bandwidth) is accepted on >= 95 % with it.
-    /// seel_ruppin, iecf, complementary, ekf and mekf also bring each reading forward by this delay
-    /// (lag_compensated) before they use it: on the eight BROAD trials that took seel_ruppin 2.41 -> 2.07 deg, ekf
-    /// 2.61 -> 2.40, mekf 3.15 -> 2.94, iecf 3.21 -> 3.13, complementary 2.63 -> 2.73 (trial 31, the stationary
-    /// magnet, 3.72 -> 4.51; kept for one model of the sensor across filters), dlkf 5.15 -> 5.45 (it keeps its
-    /// readings as they come). 0 = a magnetometer in step with the gyro.
+    /// The magnetometer's own delay behind the gyro beyond one sample, s: the dip test tolerates a lag of one sample
+    /// interval (a reading taken just before the gyro's) plus this, i.e. both dip thresholds widen by
+    /// |w_h| (dt + mag_latency_s); seel_ruppin, iecf, complementary, ekf and mekf also bring each reading forward by
+    /// it (lag_compensated). 0 = a magnetometer in step with the gyro. Default 0.0064 s: the group delay
+    /// 1 / (2 pi f_c) of a magnetometer averaging with a first-order corner f_c = 25 Hz (a part sampled at 100 Hz
+    /// averages well below its 50 Hz Nyquist limit).
     double mag_latency_s = 0.0064;
-    /// A disturbance whose field stays the same for this long becomes the new reference field, s; 0 = never.
-    /// Default 0 (off): a steady disturbed field cannot be told from a new earth field by |m| and the dip alone, and
-    /// adopting it costs the heading for the rest of the disturbance and again once it ends (Fan's test E, 30 and
-    /// 60 s over a ferromagnetic floor, with 20 s as in VQF's magNewTime: seel_ruppin 17.2 deg instead of 1.2, ekf
-    /// 19.7 instead of 3.0, iecf 14.3 instead of 2.7; no change on the BROAD trials). A wrong reference (a start
-    /// next to a magnet) still cannot shut the magnetometer out for good: mag_accept_after_s lets it in again.
+    /// A disturbance whose field stays the same for this long becomes the new reference field, s; 0 = never. Default
+    /// 0 (off): a steady disturbed field cannot be told from a new earth field by |m| and the dip alone, and adopting
+    /// it costs the heading for the rest of the disturbance and again once it ends (Fan et al.'s test E). A wrong
+    /// reference (a start next to a magnet) still cannot shut the magnetometer out for good: mag_accept_after_s lets
+    /// it in again.
     double mag_max_rejection_s = 0.0;
     /// After this much rejection time the magnetometer is used again with the reduced gain, s. Default 60 s
     /// (VQF's magMaxRejectionTime): a minute of gyro-only heading drifts by well under 1 deg with a bias

@@ -56,15 +56,10 @@ inline constexpr std::array<MekfNoise, 4> kNezTable3 = {{
 }};
 /// mekf_adaptive's default sets: Table 3 with the static set's gyro error taken from the slow set (1e-3 instead of
 /// 0.1 rad/s/sqrt(Hz)). A gyro's global error (noise plus scale and misalignment errors, which grow with the rate)
-/// cannot be larger at rest than in slow motion. Nez identified 0.1 on a clean static recording, where following
-/// the magnetometer costs nothing; but with it the static set's heading follows the magnetometer with a time
-/// constant of sqrt(R_m / Q_g) = (sigma_m / |h_horizontal|) / (sigma_g sqrt(f)) = 0.44 s (10 uT, 20 uT, 128 Hz), which
-/// is shorter than the time a magnet approaching a resting sensor needs to cross the detector's thresholds. With 1e-3
-/// that time constant is 44 s. Fan's test B (a magnet brought to a resting sensor five times, five noise seeds):
-/// worst heading error 6.9-7.2 deg with the magnet against 1.0-1.4 deg without; with this set 1.2-1.9 deg more than
-/// without, within Fan's 2 deg "good" grade (test_standard_tests.cpp). On the eight BROAD trials the mean total RMSE
-/// goes 4.27 -> 2.44 deg, all of it on trial 33 (a magnet attached at rest: 16.6 -> 2.1 deg); the other seven move by
-/// <= 0.05 deg.
+/// cannot be larger at rest than in slow motion; with 0.1 the static set's heading follows the magnetometer with a
+/// time constant of sqrt(R_m / Q_g) = (sigma_m / |h_horizontal|) / (sigma_g sqrt(f)) = 0.44 s (10 uT, 20 uT, 128 Hz),
+/// shorter than the time a magnet approaching a resting sensor needs to cross the detector's thresholds; with 1e-3 it
+/// is 44 s.
 inline constexpr std::array<MekfNoise, 4> kAdaptiveDefaultSets = {{
     {kNezTable3[1].sigma_g, kNezTable3[0].sigma_bg, kNezTable3[0].sigma_a, kNezTable3[0].sigma_m},  // static
     kNezTable3[1],
@@ -92,91 +87,100 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg);
 
 }  // namespace mekf
 
-class MekfFilter final : public OrientationFilter {
- public:
-  /// Own fields below (the adaptive variant's at the end); initial covariance, R-adaption, rest flag and timing come
-  /// from the base structs (documented there). max_gap_s must be <= 60 s. A restart after a gap keeps the bias and
-  /// its covariance block (see kalman_support::grow_over_gap) and starts again from the preset's noise set.
-  struct Params : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
-    /// Table 3 set used for Q and R: 0 static, 1 slow, 2 intermediate, 3 fast. Default 3 (fast): measured on the
-    /// eight BROAD trials (mean total RMSE 3.7 deg; intermediate 12.3 deg, slow 55 deg, static 74 deg). Table 3 was
-    /// identified on other sensors at 128 Hz, and R is per sample, so the sets that trust the accelerometer
-    /// more are too stiff for BROAD's 286 Hz and fast trials. For "mekf_adaptive" it is the set it starts with.
-    double preset = 3.0;
-    /// Overrides of the preset's values (MekfNoise has the meaning and units); 0 = take the preset's value.
-    /// Not allowed for "mekf_adaptive", which has one set per class (below). Defaults 0.
-    double sigma_g = 0.0;
-    double sigma_bg = 0.0;
-    double sigma_a = 0.0;
-    double sigma_m = 0.0;
-    /// 1 = while the rest detector reports rest (state_.rest* parameters), the raw gyro reading is a measurement of the
-    /// bias on all three axes (the true rate is zero; earth rotation, 0.004 deg/s, is far below a MEMS bias): a
-    /// zero-rate update with the set's gyro noise per sample, sigma_g^2 / dt, as its variance. 0 = Nez's filter,
-    /// in which only the accelerometer corrects the bias (Suh's magnetometer step leaves it alone), so the bias along
-    /// the vertical is learned only once the body tilts it into the horizontal, and meanwhile turns the heading
-    /// against a magnetometer that the fast set trusts little (sigma_m 45 uT, a heading time constant of tens of
-    /// seconds). Simulated translation at 1 g with a consumer MEMS part (test_clean_field_motion): RMS heading 2.31
-    /// deg on seed 13 (1.79 deg without the translation, a steady offset of the unlearned 0.2 deg/s vertical bias
-    /// against the magnetometer's pull), 0.64 deg with it (seeds 13-18: mean 2.31 -> 0.89 deg). The Table 3 presets
-    /// keep their meaning: this adds a measurement, it does not change Q or R. Default 1 (eight BROAD trials, mean
-    /// total RMSE: mekf 2.94 -> 2.47 deg, mekf_adaptive 5.09 -> 4.27 deg).
-    double rest_bias_update = 1.0;
-    // Adaptive variant only. Intensity thresholds at the upper end (mean + 1 standard deviation) of the classes of
-    // Nez Table 1 (slow 0.03 +- 0.02 g / 40 +- 20 deg/s, intermediate 0.7 +- 0.5 g / 300 +- 150 deg/s): each set is
-    // used only for motion within the range it was identified on. Static is below rest-like thresholds. A
-    // sample's class is the higher of its acceleration class and its rate class. (The midpoints between the class
-    // means, 170 deg/s and 0.365 g, put most of BROAD's motion into the slow class, whose stiff set then lets
-    // external acceleration into the bias.)
-    /// Below both static thresholds the sample is static: |gyr| < 0.1 rad/s (5.7 deg/s) and | |acc| - g | <
-    /// 0.3 m/s^2. Defaults 0.1 rad/s and 0.3 m/s^2.
-    double static_gyr_rad_s = 0.1;
-    double static_acc_m_s2 = 0.3;
-    /// Upper bounds of the slow class: 60 deg/s = 1.047 rad/s, 0.05 g = 0.49 m/s^2 (of external acceleration
-    /// | |acc| - g |).
-    double slow_gyr_rad_s = 1.047;
-    double slow_acc_m_s2 = 0.49;
-    /// Upper bounds of the intermediate class: 450 deg/s = 7.854 rad/s, 1.2 g = 11.77 m/s^2.
-    double intermediate_gyr_rad_s = 7.854;
-    double intermediate_acc_m_s2 = 11.77;
-    /// The intensity is the highest instantaneous class seen within this window, s, so that a single quiet sample
-    /// in the middle of a movement does not count as a calmer class. 0 = purely instantaneous. Default 0.5 s.
-    double intensity_hold_s = 0.5;
-    /// Minimum time between two changes of the parameter set, s (Nez §2.6: 10 s). Default 10 s.
-    double min_switch_interval_s = 10.0;
-    /// A change of set is made only once the intensity has differed from the set in use for this long, s, and
-    /// then to the highest class seen meanwhile: motion starts gently, and a set chosen on its first samples would
-    /// be locked in for min_switch_interval_s. 0 = at the first differing sample. Default 0.5 s (BROAD mean total
-    /// RMSE: 0 s 7.6 deg, 0.3 s 5.1, 0.5 s 5.5, 1 s 6.0, 2 s 8.7: longer keeps the old set too long at motion onset).
-    double switch_confirm_s = 0.5;
-    /// 1 = a change to a more intense class (a looser set) is made at once, without switch_confirm_s and
-    /// min_switch_interval_s; 0 = Nez's rule in both directions. Those two guard against chattering and against a
-    /// set chosen on the gentle start of a movement, but they also keep a stiff set while a movement beyond the
-    /// range it was identified on (Table 1) is under way, and a set used outside its range is wrong, not merely
-    /// noisy: simulated translation at 1 g with 1 s pauses (test_clean_field_motion) picked the slow set
-    /// (sigma_a 0.2 m/s^2) in a pause and kept it through the next moves (inclination error up to 38 deg, heading
-    /// 8.1 deg RMS; 1.8 deg with this rule). Calming down still waits for both. Default 1 (eight BROAD trials: mean
-    /// total RMSE 5.06 -> 5.09 deg, inclination 1.21 -> 1.04 deg).
-    double immediate_up_switch = 1.0;
-    /// 1 = a sample's external acceleration is the larger of | |acc| - g | and the accelerometer's residual against
-    /// the gravity the current orientation predicts, |acc - R^T g e_z|; 0 = | |acc| - g | alone, as Nez. The norm
-    /// is only a lower bound: a horizontal acceleration a changes it by sqrt(g^2 + a^2) - g, so up to 2.4 m/s^2
-    /// sideways count as static (below 0.3 m/s^2) and tilt a set with sigma_a 0.2 m/s^2 by up to 14 deg. Fan's test
-    /// E (carried 3 m in 2 s between rests, peak 4.3 m/s^2 horizontally): total RMSE 5.66 -> 2.96 deg, inclination
-    /// 3.87 -> 0.78 deg; test A 1.25 -> 1.55 deg (a tilt error of a few degrees now keeps a looser set until the
-    /// accelerometer has corrected it). Eight BROAD trials: 2.44 -> 2.45 deg. Default 1.
-    double intensity_from_residual = 1.0;
-    /// Sample rate at which Table 3 was identified, Hz (Nez: 128 Hz). sigma_a and sigma_m are per-sample values,
-    /// so at f Hz the adaptive filter scales them by sqrt(f / table_rate_hz): the accelerometer and magnetometer
-    /// then carry the same information per second as in the paper. 0 = use them as they are. Default 128.
-    double table_rate_hz = 128.0;
-    /// The adaptive variant's set per intensity class (MekfNoise has the meaning and units; each must be finite and
-    /// > 0), named sigma_<g|bg|a|m>_<class>, e.g. sigma_a_fast. Defaults: Nez Table 3 (identified on APDM Opal
-    /// sensors at 128 Hz) with the static set's gyro error from the slow set (kAdaptiveDefaultSets says why);
-    /// `bsn tune --by-intensity` identifies a sensor's own. Only "mekf_adaptive" takes them ("mekf" uses preset and
-    /// the overrides above).
-    std::array<MekfNoise, 4> sets = kAdaptiveDefaultSets;
-  };
+/// The MEKF's parameters: own fields below (the adaptive variant's at the end); initial covariance, R-adaption, rest
+/// flag and timing come from the base structs (documented there). max_gap_s must be <= 60 s. A restart after a gap
+/// keeps the bias and its covariance block (see kalman_support::grow_over_gap) and starts again from the preset's noise
+/// set.
+struct MekfParams : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
+  /// Table 3 set used for Q and R: 0 static, 1 slow, 2 intermediate, 3 fast. For "mekf_adaptive" the set it starts
+  /// with. Default 3 (fast): Table 3 was identified on other sensors at 128 Hz and R is per sample, so the sets that
+  /// trust the accelerometer more are too stiff at higher rates and in fast motion (the best on the BROAD trials).
+  double preset = 3.0;
+  /// Overrides of the preset's values (MekfNoise has the meaning and units); 0 = take the preset's value.
+  /// Not allowed for "mekf_adaptive", which has one set per class (below). Defaults 0.
+  double sigma_g = 0.0;
+  double sigma_bg = 0.0;
+  double sigma_a = 0.0;
+  double sigma_m = 0.0;
+  /// 1 = while the rest detector reports rest (rest_* parameters), the raw gyro reading measures the bias on all
+  /// three axes (the true rate is zero): a zero-rate update with the set's gyro noise per sample, sigma_g^2 / dt, as
+  /// its variance; it adds a measurement and leaves Q and R as the presets have them. 0 = Nez's filter, in which only
+  /// the accelerometer corrects the bias, so the bias along the vertical turns the heading until the body tilts it
+  /// into the horizontal. Default 1.
+  double rest_bias_update = 1.0;
+  // Adaptive variant only. Intensity thresholds at the upper end (mean + 1 standard deviation) of the classes of
+  // Nez Table 1 (slow 0.03 +- 0.02 g / 40 +- 20 deg/s, intermediate 0.7 +- 0.5 g / 300 +- 150 deg/s): each set is
+  // used only for motion within the range it was identified on. Static is below rest-like thresholds. A
+  // sample's class is the higher of its acceleration class and its rate class. (The midpoints between the class
+  // means, 170 deg/s and 0.365 g, put most of BROAD's motion into the slow class, whose stiff set then lets
+  // external acceleration into the bias.)
+  /// Below both static thresholds the sample is static: |gyr| < 0.1 rad/s (5.7 deg/s) and | |acc| - g | <
+  /// 0.3 m/s^2. Defaults 0.1 rad/s and 0.3 m/s^2.
+  double static_gyr_rad_s = 0.1;
+  double static_acc_m_s2 = 0.3;
+  /// Upper bounds of the slow class: 60 deg/s = 1.047 rad/s, 0.05 g = 0.49 m/s^2 (of external acceleration
+  /// | |acc| - g |).
+  double slow_gyr_rad_s = 1.047;
+  double slow_acc_m_s2 = 0.49;
+  /// Upper bounds of the intermediate class: 450 deg/s = 7.854 rad/s, 1.2 g = 11.77 m/s^2.
+  double intermediate_gyr_rad_s = 7.854;
+  double intermediate_acc_m_s2 = 11.77;
+  /// The intensity is the highest instantaneous class seen within this window, s, so that a single quiet sample
+  /// in the middle of a movement does not count as a calmer class. 0 = purely instantaneous. Default 0.5 s.
+  double intensity_hold_s = 0.5;
+  /// Minimum time between two changes of the parameter set, s (Nez §2.6: 10 s). Default 10 s.
+  double min_switch_interval_s = 10.0;
+  /// A change of set is made only once the intensity has differed from the set in use for this long, s, and then to
+  /// the highest class seen meanwhile: motion starts gently, and a set chosen on its first samples would be locked in
+  /// for min_switch_interval_s. 0 = at the first differing sample. Default 0.5 s (shorter chatters, longer keeps the
+  /// old set too long at motion onset).
+  double switch_confirm_s = 0.5;
+  /// 1 = a change to a more intense class (a looser set) is made at once, without switch_confirm_s and
+  /// min_switch_interval_s; 0 = Nez's rule in both directions. Default 1: those two rules guard against chattering,
+  /// but they would also keep a stiff set through a movement beyond the range it was identified on (Table 1), where
+  /// it is wrong, not merely noisy. Calming down still waits for both.
+  double immediate_up_switch = 1.0;
+  /// 1 = a sample's external acceleration is the larger of | |acc| - g | and the accelerometer's residual against the
+  /// gravity the current orientation predicts, |acc - R^T g e_z|; 0 = | |acc| - g | alone, as Nez. Default 1: the
+  /// norm is only a lower bound (a horizontal acceleration a changes it by sqrt(g^2 + a^2) - g), so up to 2.4 m/s^2
+  /// sideways would count as static and tilt the static set's sigma_a of 0.2 m/s^2.
+  double intensity_from_residual = 1.0;
+  /// Sample rate at which Table 3 was identified, Hz (Nez: 128 Hz). sigma_a and sigma_m are per-sample values,
+  /// so at f Hz the adaptive filter scales them by sqrt(f / table_rate_hz): the accelerometer and magnetometer
+  /// then carry the same information per second as in the paper. 0 = use them as they are. Default 128.
+  double table_rate_hz = 128.0;
+  /// The adaptive variant's set per intensity class (MekfNoise has the meaning and units; each must be finite and
+  /// > 0), named sigma_<g|bg|a|m>_<class>, e.g. sigma_a_fast. Defaults: Nez Table 3 (identified on APDM Opal
+  /// sensors at 128 Hz) with the static set's gyro error from the slow set (kAdaptiveDefaultSets says why);
+  /// `bsn tune --by-intensity` identifies a sensor's own. Only "mekf_adaptive" takes them ("mekf" uses preset and
+  /// the overrides above).
+  std::array<MekfNoise, 4> sets = kAdaptiveDefaultSets;
+};
 
+/// Everything the MEKF keeps between samples.
+struct MekfState {
+  Quat q = Quat::Identity();              ///< sensor-to-earth
+  Vec3 bias = Vec3::Zero();               ///< gyro bias, sensor frame, rad/s
+  mekf::Mat6 p = mekf::Mat6::Identity();  ///< error-state covariance of [dtheta (rad), db (rad/s)]
+  Vec3 w_prev = Vec3::Zero();             ///< bias-corrected rate at the previous sample, rad/s
+  bool have_w_prev = false;
+  Vec3 h_ref = Vec3::Zero();                  ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
+  MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
+  int intensity = 1;                          ///< index into Coefficients::sets in use
+  std::uint64_t last_switch_ns = 0;
+  std::array<std::uint64_t, 4> class_seen_ns{};  ///< last time each intensity class was observed
+  std::array<bool, 4> class_seen{};
+  int switches = 0;                      ///< number of parameter-set switches since initialisation
+  bool differing = false;                ///< the intensity currently differs from the set in use
+  std::uint64_t differing_since_ns = 0;  ///< since when
+  int differing_max = 0;                 ///< highest class seen since then
+  RestDetector rest;                     ///< still-sensor detection (flags().resting, the bias updates' gate)
+  MagneticRAdaption r_adaption;          ///< magnetometer variance by its disturbance
+  FilterFlags flags;
+};
+
+class MekfFilter final : public FilterBase<MekfParams, MekfState> {
+ public:
   struct Coefficients {
     MekfNoise noise;                ///< the fixed set (non-adaptive) or the starting set (adaptive)
     std::array<MekfNoise, 4> sets;  ///< the adaptive variant's set per class (Params::sets, checked)
@@ -187,35 +191,9 @@ class MekfFilter final : public OrientationFilter {
     int start_intensity = 1;
   };
 
-  struct State {
-    Quat q = Quat::Identity();              ///< sensor-to-earth
-    Vec3 bias = Vec3::Zero();               ///< gyro bias, sensor frame, rad/s
-    mekf::Mat6 p = mekf::Mat6::Identity();  ///< error-state covariance of [dtheta (rad), db (rad/s)]
-    Vec3 w_prev = Vec3::Zero();             ///< bias-corrected rate at the previous sample, rad/s
-    bool have_w_prev = false;
-    Vec3 h_ref = Vec3::Zero();                  ///< earth-frame (ENU) magnetic reference, uT; zero = not known yet
-    MagneticRAdaption::Reference h_ref_judged;  ///< magnitude and dip of h_ref for the R-adaption
-    int intensity = 1;                          ///< index into Coefficients::sets in use
-    std::uint64_t last_switch_ns = 0;
-    std::array<std::uint64_t, 4> class_seen_ns{};  ///< last time each intensity class was observed
-    std::array<bool, 4> class_seen{};
-    int switches = 0;                      ///< number of parameter-set switches since initialisation
-    bool differing = false;                ///< the intensity currently differs from the set in use
-    std::uint64_t differing_since_ns = 0;  ///< since when
-    int differing_max = 0;                 ///< highest class seen since then
-    RestDetector rest;                     ///< still-sensor detection (flags().resting, the bias updates' gate)
-    MagneticRAdaption r_adaption;          ///< magnetometer variance by its disturbance
-    FilterFlags flags;
-  };
-
   /// adaptive = false: "mekf", fixed set; true: "mekf_adaptive". Throws std::invalid_argument on bad parameters.
   MekfFilter(const Params& params, bool adaptive);
   MekfFilter() : MekfFilter(Params{}, false) {}
-
-  Quat orientation() const override { return state_.q; }
-  FilterFlags flags() const override { return state_.flags; }
-  Vec3 gyro_bias() const override { return state_.bias; }
-  std::string_view name() const override { return adaptive_ ? "mekf_adaptive" : "mekf"; }
 
   /// Error-state covariance of [dtheta (sensor frame, rad), db (rad/s)].
   const mekf::Mat6& covariance() const { return state_.p; }
@@ -225,18 +203,10 @@ class MekfFilter final : public OrientationFilter {
   const std::array<MekfNoise, 4>& sets() const { return coeff_.sets; }
   /// The noise set in use.
   MekfNoise noise() const;
-  const Params& params() const { return params_; }
-  const State& state() const { return state_; }
-  /// Continues from a state() of a filter with the same parameters.
-  void set_state(const State& state) { state_ = state; }
 
  private:
   UpdateResult start(const ImuSample& s) override;
   UpdateResult step(const ImuSample& s, double dt) override;
-  std::unique_ptr<FilterSnapshot> save_state() const override { return state_snapshot(state_); }
-  void restore_state(const FilterSnapshot& snapshot) override { state_ = snapshot_state<State>(snapshot); }
-  void clear() override;
-  void set_reference(const Vec3& mag_earth);
   int classify(const ImuSample& s) const;
   void adapt(const ImuSample& s);
   /// Makes `intensity` the set in use at t (both switch rules end here).
@@ -244,11 +214,8 @@ class MekfFilter final : public OrientationFilter {
   void update_accelerometer(const Vec3& acc, const MekfNoise& n, bool keep_heading);
   void update_magnetometer(const ImuSample& s, const MekfNoise& n, double dt);
 
-  Params params_;
   bool adaptive_;
   Coefficients coeff_;
-  State state_;
-  State initial_;  ///< a fresh filter's (reset())
 };
 
 /// Factory entries: "mekf" (fixed set) and "mekf_adaptive", with the Params fields as parameter names (the sets' as

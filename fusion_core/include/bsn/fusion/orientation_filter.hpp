@@ -105,12 +105,13 @@ class OrientationFilter {
   void restore(const FilterSnapshot& snapshot);
 
   /// Registered name, e.g. "complementary".
-  virtual std::string_view name() const = 0;
+  std::string_view name() const { return name_; }
 
   const FilterClock& clock() const { return clock_; }
 
  protected:
-  /// Checks the timing parameters (std::invalid_argument naming `filter`) and keeps them in ns.
+  /// Checks the timing parameters (std::invalid_argument naming `filter`) and keeps them in ns. `filter` is the
+  /// registered name (a string literal: snapshots keep it).
   OrientationFilter(std::string_view filter, const FilterTimingParams& timing);
 
   /// (Re)initialises from the sample: orientation and everything tied to it, never the gyro bias estimate (the gap
@@ -147,9 +148,61 @@ class OrientationFilter {
   std::uint64_t init_period_ns() const { return init_period_ns_; }
 
  private:
+  std::string_view name_;
   FilterClock clock_;
   std::uint64_t max_gap_ns_ = 0;
   std::uint64_t init_period_ns_ = 0;
+};
+
+/// The base of every filter: its Params (P, derived from FilterTimingParams) and its State (S: everything it keeps
+/// between samples, the components in it included, with the orientation `q` and the `flags`), a fresh filter's State
+/// for reset(), and what the interface asks of them. A filter derives from FilterBase<ItsParams, ItsState>, fills
+/// state_ with its components in its constructor and ends it with keep_fresh_state().
+template <class P, class S>
+class FilterBase : public OrientationFilter {
+ public:
+  using Params = P;
+  using State = S;
+
+  Quat orientation() const final { return state_.q; }
+  FilterFlags flags() const final { return state_.flags; }
+  /// The State's gyro bias estimate: its `gyro_bias` or `bias`, else its rest low-pass's (`bias_lowpass`).
+  Vec3 gyro_bias() const final {
+    if constexpr (requires { state_.gyro_bias; }) {
+      return state_.gyro_bias;
+    } else if constexpr (requires { state_.bias; }) {
+      return state_.bias;
+    } else {
+      return state_.bias_lowpass.bias();
+    }
+  }
+  const Params& params() const { return params_; }
+  const State& state() const { return state_; }
+  /// Continues from a state() of a filter with the same parameters.
+  void set_state(const State& state) { state_ = state; }
+
+ protected:
+  /// `params` as checked by the filter; the timing parameters are checked here.
+  FilterBase(std::string_view filter, const Params& params) : OrientationFilter(filter, params), params_(params) {}
+  /// The state reset() returns to: state_ as the constructor leaves it.
+  void keep_fresh_state() { fresh_ = state_; }
+  const State& fresh_state() const { return fresh_; }
+  void clear() override { state_ = fresh_; }
+  /// The end of a step that advanced the state: the rest detector and the start-up flag see the sample.
+  UpdateResult updated(const ImuSample& s) {
+    state_.flags.resting = state_.rest.update(s);
+    state_.flags.initialising = within_init_period(s.timestamp_ns);
+    return UpdateResult::kUpdated;
+  }
+
+  Params params_;
+  State state_;
+
+ private:
+  std::unique_ptr<FilterSnapshot> save_state() const final { return state_snapshot(state_); }
+  void restore_state(const FilterSnapshot& snapshot) final { state_ = snapshot_state<State>(snapshot); }
+
+  State fresh_;
 };
 
 /// A filter's name and parameter overrides (name -> value, SI units as each filter documents).
