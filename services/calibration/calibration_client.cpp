@@ -263,8 +263,8 @@ int run_live_calibration(const LiveCalibrationOptions& opt) {
   }
   const std::uint64_t lost_before = progress_reader->writers_lost();
   request_writer->write(request);
-  std::fprintf(stderr, "request %s: %s of %s\n", request.request_id().c_str(), calib::kind_name(*calib::parse_kind(opt.kind)),
-               request.node_id().c_str());
+  std::fprintf(stderr, "request %s: %s of %s\n", request.request_id().c_str(),
+               calib::kind_name(*calib::parse_kind(opt.kind)), request.node_id().c_str());
 
   if (const auto code = follow_request(replies, *progress_reader, *request_writer, request, lost_before)) return *code;
   // Ctrl-C (or SIGTERM): cancel the request on the service, and say what it answered.
