@@ -20,6 +20,7 @@
 
 #include "bsn/dds/conversions.hpp"
 #include "bsn/logging/log.hpp"
+#include "participant_discovery.hpp"
 
 namespace bsn::dds {
 
@@ -261,86 +262,6 @@ void make_exclusive(OwnershipQosPolicy& ownership, LivelinessQosPolicy& liveline
 
 bool is_per_subject(const std::string& topic) { return is_owned_estimate(topic) || topic == kStatusTopic.name; }
 
-// Remembers the partitions each discovered bsn/raw writer had when it was first discovered (before Fast DDS pairs
-// it with a reader: PDP::addWriterProxyData calls the listener first), and which discovered participants have not
-// finished their authentication handshake with this one: the evidence watch_peers names.
-struct Participant::Discovery final : DomainParticipantListener {
-  using GuidPrefix = eprosima::fastrtps::rtps::GuidPrefix_t;
-  mutable std::mutex mutex;
-  std::map<eprosima::fastrtps::rtps::GUID_t, std::vector<std::string>> partitions;
-  struct Handshake {
-    std::uint64_t discovered_ns = 0;
-    bool authorised = false;
-  };
-  std::map<GuidPrefix, Handshake> handshakes;
-  std::uint64_t refused = 0;             ///< participants whose authentication failed
-  std::uint64_t last_authorised_ns = 0;  ///< when the last handshake finished
-  /// The identity folder, kept for the participant's re-creation (the environment may have changed since).
-  std::string security_dir;
-
-  void on_participant_discovery(DomainParticipant*,
-                                eprosima::fastrtps::rtps::ParticipantDiscoveryInfo&& info) override {
-    using Info = eprosima::fastrtps::rtps::ParticipantDiscoveryInfo;
-    std::lock_guard lock(mutex);
-    const GuidPrefix& prefix = info.info.m_guid.guidPrefix;
-    if (info.status == Info::DISCOVERED_PARTICIPANT)
-      handshakes.try_emplace(prefix, Handshake{monotonic_ns(), false});
-    else if (info.status == Info::REMOVED_PARTICIPANT || info.status == Info::DROPPED_PARTICIPANT)
-      handshakes.erase(prefix);
-  }
-  void onParticipantAuthentication(DomainParticipant*,
-                                   eprosima::fastrtps::rtps::ParticipantAuthenticationInfo&& info) override {
-    using Info = eprosima::fastrtps::rtps::ParticipantAuthenticationInfo;
-    std::lock_guard lock(mutex);
-    if (info.status == Info::AUTHORIZED_PARTICIPANT) {
-      handshakes.try_emplace(info.guid.guidPrefix, Handshake{monotonic_ns(), false}).first->second.authorised = true;
-      last_authorised_ns = monotonic_ns();
-    } else {
-      ++refused;
-      handshakes.erase(info.guid.guidPrefix);
-    }
-  }
-  void on_publisher_discovery(DomainParticipant*, eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override {
-    using Info = eprosima::fastrtps::rtps::WriterDiscoveryInfo;
-    if (!is_per_node(info.info.topicName().to_string())) return;
-    std::lock_guard lock(mutex);
-    if (info.status == Info::DISCOVERED_WRITER)
-      partitions.try_emplace(info.info.guid(), info.info.m_qos.m_partition.getNames());
-    else if (info.status == Info::REMOVED_WRITER)
-      partitions.erase(info.info.guid());
-  }
-  /// "N discovered participant(s) without a finished handshake (GUID prefixes ...), M refused".
-  std::string unfinished_handshakes(std::uint64_t older_than_ns) const {
-    std::lock_guard lock(mutex);
-    const std::uint64_t now = monotonic_ns();
-    std::ostringstream out;
-    std::size_t n = 0, authorised = 0;
-    for (const auto& [prefix, h] : handshakes) {
-      if (h.authorised) {
-        ++authorised;
-        continue;
-      }
-      if (now - h.discovered_ns < older_than_ns) continue;
-      out << (n++ == 0 ? " " : ", ") << prefix;
-    }
-    std::ostringstream text;
-    text << authorised << " participant(s) authenticated, " << n << " discovered " << older_than_ns / 1'000'000'000ull
-         << "+ s ago without a finished handshake" << (n > 0 ? ":" : "") << out.str();
-    if (refused > 0) text << ", " << refused << " refused";
-    return text.str();
-  }
-  /// True if a handshake finished within the last `window_ns`: the handshakes progress, only slowly.
-  bool progressing(std::uint64_t window_ns) const {
-    std::lock_guard lock(mutex);
-    return last_authorised_ns != 0 && monotonic_ns() - last_authorised_ns < window_ns;
-  }
-  void clear() {
-    std::lock_guard lock(mutex);
-    partitions.clear();
-    handshakes.clear();
-  }
-};
-
 bool Participant::writer_may_write_node(const eprosima::fastrtps::rtps::GUID_t& writer, const std::string& node) const {
   if (!discovery_) return true;
   std::lock_guard lock(discovery_->mutex);
@@ -403,58 +324,6 @@ TopicDescription* Participant::admitting_topic(eprosima::fastdds::dds::Topic* to
                                                 std::to_string(index), {}, admission_->class_name.c_str());
   if (!filtered) throw std::runtime_error("cannot create the admission filter of topic " + topic->get_name());
   return filtered;
-}
-
-void count_undecodable(EndpointEvents& events) {
-  if (!events.undecodable_counter) return;
-  if ((*events.undecodable_counter)++ == 0)
-    logging::log_warn("topic ", events.topic, ": a sample that does not decode as this topic's type was dropped ",
-                      "(a writer with another definition of the type?); counted on bsn/status as undecodable_samples");
-}
-
-bool new_instant_for_owner(EndpointEvents& events, const SampleInfo& info, const DataReader* reader,
-                           std::uint64_t instant_ns) {
-  if (reader->get_qos().ownership().kind != EXCLUSIVE_OWNERSHIP_QOS) return true;
-  const eprosima::fastrtps::rtps::GUID_t& writer = info.sample_identity.writer_guid();
-  auto [it, fresh] = events.delivered.try_emplace(info.instance_handle, EndpointEvents::Delivered{writer, instant_ns});
-  if (fresh) return true;
-  if (it->second.writer != writer && instant_ns <= it->second.instant_ns) {
-    if (events.superseded++ == 0)
-      logging::log_info("topic ", events.topic, ": a new owner's sample of an instant its previous owner already ",
-                        "delivered was dropped (a standby taking over behind its primary); no instant comes twice");
-    return false;
-  }
-  it->second = {writer, instant_ns};
-  return true;
-}
-
-void count_lost(EndpointEvents& events, const SampleInfo& info, const DataReader* reader) {
-  const std::int64_t seq = info.sample_identity.sequence_number().to64long();
-  const auto& writer = info.sample_identity.writer_guid();
-  bool first = false;
-  if (events.last_writer_sequence == nullptr || events.last_writer != writer) {
-    auto [it, inserted] = events.last_sequence.try_emplace(writer, seq);
-    events.last_writer = writer;
-    events.last_writer_sequence = &it->second;  // std::map entries stay where they are
-    first = inserted;
-  }
-  std::int64_t& last = *events.last_writer_sequence;
-  if (reader->get_qos().ownership().kind == EXCLUSIVE_OWNERSHIP_QOS) {
-    auto [owner, fresh] = events.owner_of_instance.try_emplace(info.instance_handle, writer);
-    if (!fresh && owner->second != writer) {  // ownership passed: what it wrote meanwhile went to the owner's
-      owner->second = writer;
-      last = seq;
-      return;
-    }
-  }
-  if (first) return;  // samples before a reader matches are not its losses
-  if (seq > last + 1) {
-    const auto lost = static_cast<std::uint64_t>(seq - last - 1);
-    if (events.lost_counter && (*events.lost_counter += lost) == lost)
-      logging::log_warn("topic ", events.topic, ": ", lost, " sample(s) of a writer never arrived (a DDS resource ",
-                        "limit, a full history or the network); counted on bsn/status as dds_lost_samples");
-  }
-  last = std::max(last, seq);
 }
 
 int default_domain() {
@@ -642,130 +511,6 @@ void Participant::create_one_reader(Subscriber* subscriber, TopicDescription* to
   std::lock_guard lock(mutex_);
   reader_listeners_.push_back(std::move(listener));
   readers_.push_back(r);
-}
-
-}  // namespace bsn::dds
-
-namespace bsn::dds {
-
-std::shared_ptr<EndpointHandle> Participant::add_writer(const std::string& topic, TopicQos delivery,
-                                                        std::shared_ptr<EndpointEvents> events, const std::string& node,
-                                                        const WriterScope& scope) {
-  std::lock_guard lock(endpoints_mutex_);
-  auto handle = std::make_shared<EndpointHandle>();
-  handle->guard = &writer_guard_;
-  WriterRecipe recipe{handle, std::move(events), topic, delivery, node, scope};
-  handle->writer = create_writer(recipe);
-  writer_recipes_.push_back(std::move(recipe));
-  return handle;
-}
-
-std::shared_ptr<EndpointHandle> Participant::add_reader(const std::string& topic, std::optional<std::size_t> admission,
-                                                        TopicQos delivery, std::shared_ptr<EndpointEvents> events,
-                                                        const std::optional<std::string>& subject) {
-  std::lock_guard lock(endpoints_mutex_);
-  auto handle = std::make_shared<EndpointHandle>();
-  handle->guard = &writer_guard_;
-  ReaderRecipe recipe{handle, std::move(events), topic, admission, delivery, subject};
-  create_reader(recipe);
-  reader_recipes_.push_back(std::move(recipe));
-  return handle;
-}
-
-bool Participant::writer_is_volatile(const EndpointHandle& handle) {
-  return handle.writer.load()->get_qos().durability().kind == VOLATILE_DURABILITY_QOS;
-}
-
-void Participant::expect(const std::shared_ptr<EndpointEvents>& events, const std::string& peer) {
-  if (!secured_) return;
-  std::lock_guard lock(endpoints_mutex_);
-  auto it = std::find_if(expectations_.begin(), expectations_.end(), [&](const auto& e) { return e.peer == peer; });
-  if (it == expectations_.end()) it = expectations_.insert(expectations_.end(), Expectation{peer, {}, monotonic_ns()});
-  it->endpoints.push_back(events);
-}
-
-bool Participant::watch_peers() {
-  if (!secured_) return false;
-  std::unique_lock lock(endpoints_mutex_);
-  const std::uint64_t now = monotonic_ns();
-  if (peer_bound_ns_ == 0) peer_bound_ns_ = static_cast<std::uint64_t>(kPeerBound_s * 1e9);
-  const Expectation* unmet = nullptr;
-  bool all_met = true;
-  for (Expectation& e : expectations_) {
-    bool matched = false, live = false;
-    for (const auto& weak : e.endpoints) {
-      if (const auto ev = weak.lock()) {
-        live = true;
-        matched = matched || ev->matched.load() > 0 || ev->matched_exclusive.load() > 0;
-      }
-    }
-    if (!live || matched) {
-      e.unmatched_since_ns = now;
-      continue;
-    }
-    all_met = false;
-    if (now - e.unmatched_since_ns >= peer_bound_ns_ && unmet == nullptr) unmet = &e;
-  }
-  if (all_met) peer_bound_ns_ = static_cast<std::uint64_t>(kPeerBound_s * 1e9);
-  if (unmet == nullptr) return false;
-  // On a loaded machine with many participants the handshakes take seconds each; while some still finish, a new
-  // participant would only start them all again (every process at once, a storm that never settles).
-  if (discovery_->progressing(peer_bound_ns_ / 4)) return false;
-  const std::uint64_t rejoin = ++rejoins_;
-  logging::log_error("no ", unmet->peer, " matched in ", peer_bound_ns_ / 1'000'000'000ull, " s (",
-                     discovery_->unfinished_handshakes(peer_bound_ns_ / 2),
-                     "): none runs, or a DDS-Security handshake never completed (a Fast DDS 2.9.1 fault). Making a ",
-                     "new participant (", rejoin, "; counted on bsn/status as participant_rejoins)");
-  recreate();
-  peer_bound_ns_ = std::min(2 * peer_bound_ns_, static_cast<std::uint64_t>(kMaxPeerBound_s * 1e9));
-  for (Expectation& e : expectations_) e.unmatched_since_ns = monotonic_ns();
-  return true;
-}
-
-void Participant::recreate() {
-  std::lock_guard lock(endpoints_mutex_);
-  {
-    // No write uses a DataWriter of the old participant once this block ends.
-    std::unique_lock guard(writer_guard_);
-    for (const WriterRecipe& r : writer_recipes_)
-      if (const auto h = r.handle.lock()) h->writer = nullptr;
-  }
-  std::ostringstream was;
-  was << participant_->guid().guidPrefix;
-  close();
-  discovery_->clear();
-  auto forget = [](EndpointEvents& ev) {
-    ev.matched = 0;
-    ev.matched_exclusive = 0;
-    ev.alive_writers = 0;
-    ev.alive_writers_exclusive = 0;
-    std::lock_guard callback_lock(ev.callback_mutex);
-    // The remote writers keep their sequence numbers; what they wrote while unmatched was never this reader's.
-    ev.last_sequence.clear();
-    ev.last_writer_sequence = nullptr;
-    ev.owner_of_instance.clear();
-  };
-  open();
-  std::erase_if(writer_recipes_, [](const WriterRecipe& r) { return r.handle.expired(); });
-  std::erase_if(reader_recipes_, [](const ReaderRecipe& r) { return r.handle.expired(); });
-  std::vector<DataWriter*> writers;
-  for (const WriterRecipe& r : writer_recipes_) {
-    forget(*r.events);
-    writers.push_back(create_writer(r));
-  }
-  for (const ReaderRecipe& r : reader_recipes_) {
-    forget(*r.events);
-    create_reader(r);
-  }
-  {
-    std::unique_lock guard(writer_guard_);
-    for (std::size_t i = 0; i < writer_recipes_.size(); ++i)
-      if (const auto h = writer_recipes_[i].handle.lock()) h->writer = writers[i];
-  }
-  std::ostringstream is;
-  is << participant_->guid().guidPrefix;
-  logging::log_info("the new DDS participant is ", is.str(), " (was ", was.str(), "), with ", writer_recipes_.size(),
-                    " writer(s) and ", reader_recipes_.size(), " reader(s)");
 }
 
 }  // namespace bsn::dds
