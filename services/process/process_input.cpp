@@ -26,16 +26,9 @@ void read_session(const std::string& path, ProcessInput& in) {
   if (const auto it = r.attributes().find("body_model"); it != r.attributes().end()) in.recorded_body = it->second;
   for (const io::SessionStream& s : r.streams_of(dds::kRawTopic.name)) {
     NodeTrack t;
-    t.timestamp_ns = r.read_u64(s, "timestamp_ns");
-    t.seq = r.read_u64(s, "seq");
-    t.arrival_ns = r.read_u64(s, "arrival_ns");
-    t.acc = r.read_f64(s, "acc", 3);
-    t.gyr = r.read_f64(s, "gyr", 3);
-    t.mag = r.read_f64(s, "mag", 3);
-    t.channels = r.read_u32(s, "channels");
-    const std::size_t n = t.timestamp_ns.size();
-    if (t.seq.size() != n || t.arrival_ns.size() != n || t.acc.size() != 3 * n || t.gyr.size() != 3 * n ||
-        t.mag.size() != 3 * n || t.channels.size() != n) {
+    static_cast<RawColumns&>(t) = read_raw_columns(r, s);
+    const std::size_t n = t.size();
+    if (t.seq.size() != n || t.arrival_ns.size() != n || !t.measurement_lengths_agree()) {
       throw io::IoError(path + ": the datasets of '" + s.group + "' differ in length");
     }
     t.node = s.key;
@@ -89,12 +82,7 @@ std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const f
     t.node = spec.node;
     t.segment = i;
     const std::size_t n = rec.size();
-    t.timestamp_ns.resize(n);
-    t.seq.resize(n);
-    t.acc.resize(3 * n);
-    t.gyr.resize(3 * n);
-    t.mag.resize(3 * n);
-    t.channels.resize(n);
+    t.resize(n);
     for (std::size_t k = 0; k < n; ++k) {
       const fusion::ImuSample s = rec.sample(k);
       t.timestamp_ns[k] = s.timestamp_ns;

@@ -10,6 +10,7 @@
 #include "bsn/fusion/body_model.hpp"
 #include "bsn_idl/bsn.h"
 #include "process_command.hpp"
+#include "session_streams.hpp"
 
 namespace bsn::services::process_detail {
 
@@ -20,13 +21,9 @@ class UsageError : public std::runtime_error {
 };
 
 /// One node's samples, column by column, and where they came from.
-struct NodeTrack {
+struct NodeTrack : RawColumns {
   std::string node;
   std::size_t segment = 0;
-  std::vector<std::uint64_t> timestamp_ns, seq, arrival_ns;
-  std::vector<double> acc, gyr, mag;  ///< N x 3, row-major
-  std::vector<std::uint32_t> channels;
-  std::size_t size() const { return timestamp_ns.size(); }
 };
 
 struct TimedCalibration {

@@ -15,6 +15,16 @@ bool RawColumns::measurement_lengths_agree() const {
   return acc.size() == 3 * n && gyr.size() == 3 * n && mag.size() == 3 * n && channels.size() == n;
 }
 
+void RawColumns::resize(std::size_t rows) {
+  timestamp_ns.resize(rows);
+  seq.resize(rows);
+  if (!arrival_ns.empty()) arrival_ns.resize(rows);
+  acc.resize(3 * rows);
+  gyr.resize(3 * rows);
+  mag.resize(3 * rows);
+  channels.resize(rows);
+}
+
 RawColumns read_raw_columns(const io::SessionReader& r, const io::SessionStream& s) {
   RawColumns c;
   c.timestamp_ns = r.read_u64(s, "timestamp_ns");

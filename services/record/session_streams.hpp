@@ -20,6 +20,8 @@ struct RawColumns {
   std::vector<double> acc, gyr, mag;  ///< 3 per sample
   std::vector<std::uint32_t> channels;
   std::size_t size() const { return timestamp_ns.size(); }
+  /// Every column to `rows` rows (three values a row for acc, gyr and mag); arrival_ns only when it holds any.
+  void resize(std::size_t rows);
   /// Rows that every measurement column (time, acc, gyr, mag, channels) holds: a recording stopped by a crash may
   /// hold one column a write ahead of another.
   std::size_t measurement_rows() const;

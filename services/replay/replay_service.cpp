@@ -30,12 +30,7 @@ std::vector<ReplayTrack> load_session(const std::string& path) {
     if (n != t.timestamp_ns.size() || n != t.channels.size()) {
       logging::log_warn(path, ": ", s.group, ": columns of different lengths, replaying the first ", n, " samples");
     }
-    t.timestamp_ns.resize(n);
-    t.seq.resize(n);
-    t.acc.resize(3 * n);
-    t.gyr.resize(3 * n);
-    t.mag.resize(3 * n);
-    t.channels.resize(n);
+    t.resize(n);
     if (n > 0) tracks.push_back(std::move(t));
   }
   if (tracks.empty()) throw io::IoError(path + ": no samples of bsn/raw in this session");
