@@ -38,7 +38,8 @@ TEST_F(ProcessTest, SessionAlignsRecordsExportsAndStopsEverything) {
     const auto ts = r.read_u64(s, "timestamp_ns");
     const auto flags = r.read_u32(s, "flags");
     ASSERT_GT(ts.size(), 2000u) << s.key << ": about 30 s at 100 Hz";
-    EXPECT_NEAR(static_cast<double>(ts.back() - ts.front()) * 1e-9, 30.0, 1.5) << s.key;
+    // The trial starts once every segment flows (samples before are not written) and stops on a 50 ms tick.
+    EXPECT_NEAR(static_cast<double>(ts.back() - ts.front()) * 1e-9, 30.0, 1.0) << s.key;
     std::size_t aligned = 0;
     for (const auto f : flags) aligned += (f & 32u) != 0;  // FLAG_SEGMENT_FRAME
     EXPECT_EQ(aligned, flags.size()) << s.key << ": recorded after the alignment";
