@@ -19,14 +19,20 @@ struct AxisCurve {
   calib::NoiseCoefficients coefficients{0, 0, 0};
 };
 
-// One panel per sensor (its own unit on the y axis), log-log, one line per axis, and where each axis's N (the -1/2
-// line at tau = 1 s), B (the flat minimum, adev = 0.664 B) and K (the +1/2 line at tau = 3 s) were read.
-std::string svg_plot(const std::vector<AxisCurve>& curves) {
+// The sensors of the curves ("gyr" of "gyr_x", ...), in their first order.
+std::vector<std::string> sensors_of(const std::vector<AxisCurve>& curves) {
   std::vector<std::string> sensors;
   for (const auto& c : curves) {
     const std::string sensor = c.name.substr(0, c.name.find('_'));
     if (std::find(sensors.begin(), sensors.end(), sensor) == sensors.end()) sensors.push_back(sensor);
   }
+  return sensors;
+}
+
+// One panel per sensor (its own unit on the y axis), log-log, one line per axis, and where each axis's N (the -1/2
+// line at tau = 1 s), B (the flat minimum, adev = 0.664 B) and K (the +1/2 line at tau = 3 s) were read.
+std::string svg_plot(const std::vector<AxisCurve>& curves) {
+  const std::vector<std::string> sensors = sensors_of(curves);
   const double w = 720, panel_h = 320, left = 80, right = 20, top = 30, bottom = 45;
   const double h = panel_h * static_cast<double>(sensors.size());
   char buf[320];

@@ -89,12 +89,6 @@ class Recorder {
       const std::size_t id = writer_.add_stream(t.name, key.empty() ? "_" : key, pubsub.getName(), spec.specs);
       it = t.streams.emplace(key, StreamState{id, 0}).first;
     }
-    // Before the trial starts (with --body: until every segment's streams flow) a sample only makes its stream
-    // known; it is counted and reported, not written, so the trial spans the duration asked for.
-    if (!trial_started_) {
-      ++before_trial_;
-      return;
-    }
     StreamState& s = it->second;
     writer_.append(s.id, kArrivalColumn, &arrival, 1);
     writer_.append(s.id, kCdrColumn, payload_.data, payload_.length);
@@ -142,18 +136,6 @@ class Recorder {
     return topics_[topic].streams.size();
   }
 
-  /// From now on samples are written to the file.
-  void start_trial() {
-    std::lock_guard lock(mutex_);
-    trial_started_ = true;
-  }
-  /// Samples that arrived before the trial started (not in the file).
-  std::uint64_t samples_before_trial() {
-    std::lock_guard lock(mutex_);
-    return before_trial_;
-  }
-
-  /// Samples written (or to be written) to the file.
   std::uint64_t total_samples() {
     std::lock_guard lock(mutex_);
     std::uint64_t n = 0;
@@ -169,8 +151,6 @@ class Recorder {
   eprosima::fastrtps::rtps::SerializedPayload_t payload_{256};
   std::uint64_t serialise_failures_ = 0;
   std::uint64_t flushed_samples_ = 0;
-  bool trial_started_ = false;
-  std::uint64_t before_trial_ = 0;
 };
 
 std::string iso_time(std::uint64_t unix_time_ns) {
@@ -305,9 +285,9 @@ int run_record(const RecordOptions& opt) {
     // took; with no sample at all it ends at the same time after the start. With --body it counts from when every
     // segment's stream of bsn/raw and bsn/orientation flows (each node and the fusion are discovered one by one, up
     // to seconds apart), or from kStreamsWait_s after the first sample, with a warning naming what was missing.
+    // Samples before that are kept (a recording loses nothing), so early streams are longer than the duration.
     constexpr double kStreamsWait_s = 10.0;
     std::optional<Clock::time_point> first_sample, trial_start;
-    if (opt.body_path.empty()) recorder.start_trial();  // nothing to wait for: every sample is the trial's
     auto every_stream_flows = [&] {
       if (opt.body_path.empty()) return true;
       for (const std::size_t t : per_segment)
@@ -317,12 +297,11 @@ int run_record(const RecordOptions& opt) {
     exit_code = frame.run_ticks(std::chrono::milliseconds(50), [&]() -> std::optional<int> {
       const auto now = Clock::now();
       const double elapsed = std::chrono::duration<double>(now - start).count();
-      if (!first_sample && recorder.total_samples() + recorder.samples_before_trial() > 0) first_sample = now;
+      if (!first_sample && recorder.total_samples() > 0) first_sample = now;
       if (first_sample && !trial_start) {
         const bool waited_enough = std::chrono::duration<double>(now - *first_sample).count() >= kStreamsWait_s;
         if (every_stream_flows() || waited_enough) {
           trial_start = now;
-          recorder.start_trial();
           if (!every_stream_flows())
             logging::log_warn("not every segment of the body sent bsn/raw and bsn/orientation within ", kStreamsWait_s,
                               " s of the first sample; the duration counts from now");
@@ -361,8 +340,6 @@ int run_record(const RecordOptions& opt) {
     }
   }
   logging::log_info("recorded ", recorder.total_samples(), " samples to ", opt.out);
-  if (const auto before = recorder.samples_before_trial(); before > 0)
-    logging::log_info(before, " samples that arrived before every segment's streams flowed are not in the file");
   return exit_code;
 }
 

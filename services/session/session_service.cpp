@@ -358,6 +358,28 @@ int run_session(const std::string& file, int domain) {
   return code;
 }
 
+// The session's nodes: a simulated body (its scenario file) and/or real nodes, each with its source.
+void read_nodes(const Reader& r, const YAML::Node& nodes, const fs::path& base, SessionSpec& s) {
+  r.check_keys(nodes, {"simulated", "real"}, "nodes");
+  if (nodes["simulated"]) {
+    r.check_keys(nodes["simulated"], {"scenario"}, "nodes.simulated");
+    if (!nodes["simulated"]["scenario"]) r.fail(nodes["simulated"], "nodes.simulated needs scenario: FILE");
+    s.scenario = absolute_from(base, r.text(nodes["simulated"]["scenario"], "scenario"));
+    if (!fs::is_regular_file(s.scenario)) r.fail(nodes["simulated"]["scenario"], "no scenario file " + s.scenario);
+  }
+  if (nodes["real"]) {
+    if (!nodes["real"].IsSequence()) r.fail(nodes["real"], "nodes.real must be a list of {node, source, map}");
+    for (const auto& n : nodes["real"]) {
+      r.check_keys(n, {"node", "source", "map"}, "a real node");
+      if (!n["node"] || !n["source"]) r.fail(n, "a real node needs node: ID and source: URI (serial:, udp:, iio:)");
+      SessionSpec::RealNode real{r.text(n["node"], "node"), r.text(n["source"], "source"), ""};
+      if (n["map"]) real.map = absolute_from(base, r.text(n["map"], "map"));
+      s.nodes.push_back(real);
+    }
+  }
+  if (s.scenario.empty() && s.nodes.empty()) r.fail(nodes, "nodes names no source (simulated or real)");
+}
+
 }  // namespace
 
 SessionSpec load_session(const std::string& path) {
@@ -380,25 +402,7 @@ SessionSpec load_session(const std::string& path) {
   const fs::path here = fs::current_path();
   s.store_dir = absolute_from(here, root["calibrations"] ? r.text(root["calibrations"], "calibrations") : "calib");
   if (!root["nodes"]) r.fail_at(1, "the session needs nodes: (simulated: {scenario: FILE} and/or real: [...])");
-  const YAML::Node nodes = root["nodes"];
-  r.check_keys(nodes, {"simulated", "real"}, "nodes");
-  if (nodes["simulated"]) {
-    r.check_keys(nodes["simulated"], {"scenario"}, "nodes.simulated");
-    if (!nodes["simulated"]["scenario"]) r.fail(nodes["simulated"], "nodes.simulated needs scenario: FILE");
-    s.scenario = absolute_from(base, r.text(nodes["simulated"]["scenario"], "scenario"));
-    if (!fs::is_regular_file(s.scenario)) r.fail(nodes["simulated"]["scenario"], "no scenario file " + s.scenario);
-  }
-  if (nodes["real"]) {
-    if (!nodes["real"].IsSequence()) r.fail(nodes["real"], "nodes.real must be a list of {node, source, map}");
-    for (const auto& n : nodes["real"]) {
-      r.check_keys(n, {"node", "source", "map"}, "a real node");
-      if (!n["node"] || !n["source"]) r.fail(n, "a real node needs node: ID and source: URI (serial:, udp:, iio:)");
-      SessionSpec::RealNode real{r.text(n["node"], "node"), r.text(n["source"], "source"), ""};
-      if (n["map"]) real.map = absolute_from(base, r.text(n["map"], "map"));
-      s.nodes.push_back(real);
-    }
-  }
-  if (s.scenario.empty() && s.nodes.empty()) r.fail(nodes, "nodes names no source (simulated or real)");
+  read_nodes(r, root["nodes"], base, s);
   if (const YAML::Node a = root["alignment"]) {
     if (a.IsScalar() && (a.as<std::string>() == "none" || a.as<std::string>() == "false")) {
       s.align = false;

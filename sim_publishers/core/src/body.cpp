@@ -49,6 +49,43 @@ void add_alignment_moves(const AlignmentMoves& m, int side, SegmentDef& thigh, S
   }
 }
 
+// The gait's harmonics fade in once the alignment moves are done, or in and out with the gait's active windows
+// (each joint's mean angle stepping in and out with them, so the body stands upright between).
+void fade_gait_in_and_out(std::vector<SegmentDef>& segs, const Gait* gait, const AlignmentMoves* moves) {
+  if (moves) {
+    // Walking starts after the alignment moves: the gait's harmonics fade in, its mean angles step in.
+    const double start = moves->walk_start_s();
+    for (SegmentDef& seg : segs) {
+      for (RevoluteStep& step : seg.rotation) {
+        if (step.angle.harmonics.empty()) continue;
+        step.angle.envelope = {Window{start, 1e12, 1.0}};
+        if (&seg != &segs[0] && step.angle.constant != 0.0) {
+          step.angle.steps.push_back({step.angle.constant, start, 1.0});
+          step.angle.constant = 0.0;
+        }
+      }
+    }
+  }
+  if (gait && !moves && !gait->active.empty()) {
+    for (SegmentDef& seg : segs) {
+      for (RevoluteStep& step : seg.rotation) {
+        if (step.angle.harmonics.empty()) continue;
+        step.angle.envelope = gait->active;
+        if (&seg == &segs[0] || step.angle.constant == 0.0) continue;
+        for (const Window& w : gait->active) {
+          const double ramp = std::max(w.ramp_s, 0.1);  // a step needs a duration
+          step.angle.steps.push_back({step.angle.constant, w.start_s, ramp});
+          step.angle.steps.push_back({-step.angle.constant, w.end_s, ramp});
+        }
+        step.angle.constant = 0.0;
+      }
+    }
+    for (Signal& axis : segs[0].translation) {
+      if (!axis.harmonics.empty()) axis.envelope = gait->active;
+    }
+  }
+}
+
 }  // namespace
 
 Vec3 SegmentState::specific_force_sensor() const {
@@ -314,40 +351,7 @@ Body lower_body(const std::optional<Gait>& gait, const Pose& pose) {
     segs.push_back(shank);
     segs.push_back(foot);
   }
-  if (moves) {
-    // Walking starts after the alignment moves: the gait's harmonics fade in, its mean angles step in.
-    const double start = moves->walk_start_s();
-    for (SegmentDef& seg : segs) {
-      for (RevoluteStep& step : seg.rotation) {
-        if (step.angle.harmonics.empty()) continue;
-        step.angle.envelope = {Window{start, 1e12, 1.0}};
-        if (&seg != &segs[0] && step.angle.constant != 0.0) {
-          step.angle.steps.push_back({step.angle.constant, start, 1.0});
-          step.angle.constant = 0.0;
-        }
-      }
-    }
-  }
-  if (gait && !moves && !gait->active.empty()) {
-    // Walking only within the windows: the harmonics (and the pelvis's sway) fade in and out with them, and each
-    // joint's mean angle steps in at a window's start and out at its end, so the body stands upright between.
-    for (SegmentDef& seg : segs) {
-      for (RevoluteStep& step : seg.rotation) {
-        if (step.angle.harmonics.empty()) continue;
-        step.angle.envelope = gait->active;
-        if (&seg == &segs[0] || step.angle.constant == 0.0) continue;
-        for (const Window& w : gait->active) {
-          const double ramp = std::max(w.ramp_s, 0.1);  // a step needs a duration
-          step.angle.steps.push_back({step.angle.constant, w.start_s, ramp});
-          step.angle.steps.push_back({-step.angle.constant, w.end_s, ramp});
-        }
-        step.angle.constant = 0.0;
-      }
-    }
-    for (Signal& axis : segs[0].translation) {
-      if (!axis.harmonics.empty()) axis.envelope = gait->active;
-    }
-  }
+  fade_gait_in_and_out(segs, gait ? &*gait : nullptr, moves);
   return Body(std::move(segs));
 }
 

@@ -36,6 +36,20 @@ void check_range(const ParamRange& r) {
   if (r.log && !(r.lo > 0.0)) throw std::invalid_argument(what + ": a log range needs lo > 0");
 }
 
+// The global stage: the centre of the unit cube, the given start points (clamped into it), then Halton points.
+std::vector<std::vector<double>> global_stage_points(std::size_t dims, const OptimiserOptions& options,
+                                                     const std::vector<std::vector<double>>& start) {
+  std::vector<std::vector<double>> global(1, std::vector<double>(dims, 0.5));
+  for (const auto& s : start) {
+    if (s.size() != dims) throw std::invalid_argument("minimise: a start point has the wrong dimension");
+    std::vector<double> p(dims);
+    for (std::size_t d = 0; d < dims; ++d) p[d] = std::clamp(s[d], 0.0, 1.0);
+    global.push_back(p);
+  }
+  for (std::size_t i = 1; i <= options.global_points; ++i) global.push_back(halton_point(i, dims));
+  return global;
+}
+
 }  // namespace
 
 double ParamRange::value_at(double u) const {
@@ -187,16 +201,7 @@ OptimiserResult minimise(std::size_t dims, const BatchObjective& objective, cons
     if (progress) progress(seen.size(), budget, best.value);
   };
 
-  // Global stage.
-  std::vector<std::vector<double>> global(1, std::vector<double>(dims, 0.5));
-  for (const auto& s : start) {
-    if (s.size() != dims) throw std::invalid_argument("minimise: a start point has the wrong dimension");
-    std::vector<double> p(dims);
-    for (std::size_t d = 0; d < dims; ++d) p[d] = std::clamp(s[d], 0.0, 1.0);
-    global.push_back(p);
-  }
-  for (std::size_t i = 1; i <= options.global_points; ++i) global.push_back(halton_point(i, dims));
-  evaluate(global);
+  evaluate(global_stage_points(dims, options, start));
   best.global_evaluations = seen.size();
 
   // Local stage: a pattern search on the lattice of the current step, from each of the best `local_starts` points
