@@ -78,7 +78,8 @@ class Guard {
            << (guard_enabled() ? "; serialised"
                                : " (BSN_DDS_MATCH_GUARD=off: not serialised, the handshake with one of them may "
                                  "never complete)");
-      logging::log_warn(text.str());
+      // Serialised, the pair is harmless: said for the record, not as a warning.
+      logging::log(guard_enabled() ? logging::LogLevel::kInfo : logging::LogLevel::kWarn, text.str());
     }
     if (guard_enabled()) {
       std::lock_guard lock(call_mutex_);
