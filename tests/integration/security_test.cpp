@@ -414,6 +414,14 @@ TEST_F(Security, SecuredNodesAllJoinUnderLoad) {
       // Which handshakes were unfinished when the process made its participant again.
       std::printf("[ rejoin   ] %s: %s\n", process.c_str(), log.substr(at, log.find('\n', at) - at).c_str());
     }
+    // The GUID prefix each process had before it made its participant again, to find it in the lines below.
+    for (std::size_t at = log.find("the new DDS participant is "); at != std::string::npos;
+         at = log.find("the new DDS participant is ", at + 1))
+      std::printf("[ remade   ] %s: %s\n", process.c_str(), log.substr(at, log.find('\n', at) - at).c_str());
+    // Two participants whose security endpoints Fast DDS matched at once (builtin_match_guard.cpp).
+    for (std::size_t at = log.find("Fast DDS matched the "); at != std::string::npos;
+         at = log.find("Fast DDS matched the ", at + 1))
+      std::printf("[ overlap  ] %s: %s\n", process.c_str(), log.substr(at, log.find('\n', at) - at).c_str());
   }
   std::printf("[ measure  ] %ld of %zu nodes joined in %.1f s; %d new participants besides pelvis's\n", joined(),
               nodes.size(), std::chrono::duration<double>(Clock::now() - start).count(), rejoins);

@@ -6,6 +6,7 @@
 
 #include "bsn/dds/participant.hpp"
 #include "bsn/logging/log.hpp"
+#include "builtin_match_guard.hpp"
 #include "participant_discovery.hpp"
 
 namespace bsn::dds {
@@ -77,8 +78,9 @@ bool Participant::watch_peers() {
   if (discovery_->progressing(peer_bound_ns_ / 4)) return false;
   const std::uint64_t rejoin = ++rejoins_;
   logging::log_error("no ", unmet->peer, " matched in ", peer_bound_ns_ / 1'000'000'000ull, " s (",
-                     discovery_->unfinished_handshakes(peer_bound_ns_ / 2),
-                     "): none runs, or a DDS-Security handshake never completed (a Fast DDS 2.9.1 fault). Making a ",
+                     discovery_->unfinished_handshakes(peer_bound_ns_ / 2), "; ", builtin_match_overlaps(),
+                     " concurrent match(es) of security endpoints): none runs, or a DDS-Security handshake never "
+                     "completed (a Fast DDS 2.9.1 fault). Making a ",
                      "new participant (", rejoin, "; counted on bsn/status as participant_rejoins)");
   recreate();
   peer_bound_ns_ = std::min(2 * peer_bound_ns_, static_cast<std::uint64_t>(kMaxPeerBound_s * 1e9));
