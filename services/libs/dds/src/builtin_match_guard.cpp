@@ -81,10 +81,9 @@ class Guard {
       // Serialised, the pair is harmless: said for the record, not as a warning.
       logging::log(guard_enabled() ? logging::LogLevel::kInfo : logging::LogLevel::kWarn, text.str());
     }
-    if (guard_enabled()) {
-      std::lock_guard lock(call_mutex_);
-      original(security_manager, remote);
-    } else {
+    {
+      std::unique_lock lock(call_mutex_, std::defer_lock);
+      if (guard_enabled()) lock.lock();
       original(security_manager, remote);
     }
     std::lock_guard lock(state_mutex_);
