@@ -30,16 +30,19 @@ struct SeelRuppinParams : GyroBiasLowPass::Params,
                           FilterTimingParams {
   /// tau_acc: half-value time of the convergence towards the accelerometer's inclination, s. Larger trusts
   /// the gyro longer, smaller removes tilt drift faster. With the acceleration low-pass on (the default) the
-  /// low-pass already removes the accelerations of human motion, so this correction can be fast. Default
-  /// 0.5 s, the optimum on the eight BROAD trials (2 s without the low-pass).
-  double tau_acc_s = 0.5;
+  /// low-pass already removes the accelerations of human motion, and this correction's lag (1.4 tau_acc) adds to
+  /// the low-pass's while gyro errors turn the almost inertial frame in fast motion. Default 0.3 s: shorter tilts
+  /// better in simulated fast motion (docs/filters.md) but lets 1 g translations lean on the heading while the
+  /// magnetometer is out beyond the gyro's own drift (test_clean_field_motion.cpp). About 2 s without the low-pass.
+  double tau_acc_s = 0.3;
   /// tau_mag: half-value time of the heading convergence towards the magnetometer, s. Larger rides out
   /// undetected magnetic disturbances longer. Default 4 s, the optimum on the eight BROAD trials.
   double tau_mag_s = 4.0;
   /// zeta: aggressiveness of the integral bias estimate (overshoot measure); 0 disables bias estimation in
-  /// motion. Default 1: a slow integral (time constant minutes) that tracks bias drift without absorbing the
-  /// accelerations and disturbances of human motion.
-  double zeta = 1.0;
+  /// motion. The integral's rate is zeta^2 / tau_acc (and zeta^2 / tau_mag). Default 0.775 (zeta^2 / tau_acc = 2 /s):
+  /// a slow integral (time constant minutes) that tracks bias drift without absorbing the accelerations and
+  /// disturbances of human motion.
+  double zeta = 0.775;
   /// Largest inclination error one accelerometer correction acts on, rad: alpha_err,acc is clipped to this
   /// before k_acc is applied (not in the paper). Human motion brings accelerations of several g for tenths of
   /// a second; unclipped, each pulls the estimate by k_acc times up to 180 deg (a fast translation turns the estimate
