@@ -40,8 +40,9 @@ class SensorFixedField {
     /// Time between the readings that enter the fit, s. Default 0.05 s (200 rows per block).
     double mag_offset_row_s = 0.05;
     /// Least rotational spread of a block that may decide (the smallest eigenvalue of the rotation's scatter, per
-    /// row, 0..2). Default 0.05: turns of about +-20 deg about each axis.
-    double mag_offset_min_spread = 0.05;
+    /// row, 0..2). Default 0.02: turns of about +-13 deg about each axis, which a hand's slow motion gives (Nez et
+    /// al.'s slow intensity); the residual and gain tests still keep a carried sensor's changing field out.
+    double mag_offset_min_spread = 0.02;
     /// The fitted offset is taken when the block's residual with it is at most this fraction of the residual with
     /// the offset in use. Default 0.25.
     double mag_offset_max_residual_ratio = 0.25;
