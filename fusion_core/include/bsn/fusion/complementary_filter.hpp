@@ -19,9 +19,9 @@
 
 namespace bsn::fusion {
 
-/// The complementary filter's parameters: own fields below; the rest bias low-pass, rest detection and the gap and
-/// start-up timing come from the base structs (documented there). During the start-up period (init_period_s) the tilt
-/// correction is not clipped.
+/// The complementary filter's parameters: own fields below; the rest bias low-pass and the magnetometer rejection with
+/// their switches, rest detection and the gap and start-up timing come from the base structs (documented there).
+/// During the start-up period (init_period_s) the tilt correction is not clipped.
 struct ComplementaryParams : GyroBiasRemovalParams, MagRejectionParams, RestDetector::Params, FilterTimingParams {
   /// Time constant of the tilt correction towards the accelerometer, s. Larger trusts the gyro longer
   /// (less sensitive to accelerations), smaller removes gyro drift faster. Default 2 s.
