@@ -42,7 +42,7 @@ constexpr auto kParams =
                           {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
                           {"bias_min_static_s", &P::bias_min_static_s},
                       }),
-                      r_adaption_param_fields<P>(), timing_param_fields<P>(), rest_param_fields<P>());
+                      mag_rejection_param_fields<P>(), timing_param_fields<P>(), rest_param_fields<P>());
 
 // Rotation matrix exp(-[w x] dt): an earth-fixed vector seen from a sensor turning at w.
 // Rodrigues: exp(-[v x]) = I - (sin a / a) [v x] + ((1 - cos a) / a^2) [v x]^2 with v = w dt, a = |v|.

@@ -33,7 +33,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"acc_variance_cap", &P::acc_variance_cap},
                                                {"rest_bias_update", &P::rest_bias_update},
                                            }),
-                                           kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
+                                           kalman_init_param_fields<P>(), mag_rejection_param_fields<P>(),
                                            timing_param_fields<P>(), rest_param_fields<P>());
 
 // q (x) (0, v) = xi(q) v.

@@ -28,7 +28,7 @@ void grow_over_gap(Block&& p_bias, double walk_var_per_s, double gap_s, double i
 /// R-adaption switch, the rest detector) or max_gap_s above 60 s, the longest gap their prediction bridges.
 template <class P>
 void check_shared_params(std::string_view filter, const P& params) {
-  params.RAdaptionFilterParams::check(filter);
+  params.MagRejectionParams::check(filter);
   if (params.max_gap_s > 60.0) {
     throw std::invalid_argument(std::string(filter) + ": max_gap_s must be <= 60 s");
   }

@@ -40,7 +40,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
                                                {"table_rate_hz", &P::table_rate_hz},
                                                {"rest_bias_update", &P::rest_bias_update},
                                            }),
-                                           kalman_init_param_fields<P>(), r_adaption_param_fields<P>(),
+                                           kalman_init_param_fields<P>(), mag_rejection_param_fields<P>(),
                                            timing_param_fields<P>(), rest_param_fields<P>());
 
 // Below this rotation angle per step the closed forms lose digits to cancellation; their Taylor series are used.

@@ -155,15 +155,13 @@ int run_eval(const EvalOptions& opt) {
       std::fprintf(stderr, "bsn eval: error: --body scores one session file or folder of recordings at a time\n");
       return 2;
     }
-    BodyEvalOptions b;
-    b.input = opt.inputs[0];
-    b.body_path = opt.body_path;
-    b.filters = opt.filters;
-    b.align_window = opt.align_window;
-    b.json = opt.json;
-    b.plot_path = opt.plot_path;
-    b.import = opt.import;
-    return run_body_eval(b);
+    return run_body_eval({.input = opt.inputs[0],
+                          .body_path = opt.body_path,
+                          .import = opt.import,
+                          .filters = opt.filters,
+                          .align_window = opt.align_window,
+                          .json = opt.json,
+                          .plot_path = opt.plot_path});
   }
   NamedFilters filters;
   if (const int code = eval_filters(opt, filters); code != 0) return code;

@@ -16,6 +16,7 @@
 #include "bsn/io/recording.hpp"
 #include "bsn/io/session_file.hpp"
 #include "process_fixture.hpp"
+#include "session_streams.hpp"
 
 namespace bsn::integration {
 namespace {
@@ -23,30 +24,16 @@ namespace {
 using namespace std::chrono_literals;
 using SampleInfo = eprosima::fastdds::dds::SampleInfo;
 
-struct RawTrack {
-  std::vector<std::uint64_t> ts, seq;
-  std::vector<double> acc, gyr, mag;
-  std::vector<std::uint32_t> channels;
-};
-
-std::map<std::string, RawTrack> read_raw(const std::string& path) {
+std::map<std::string, services::RawColumns> read_raw(const std::string& path) {
   const io::SessionReader r(path);
-  std::map<std::string, RawTrack> out;
-  for (const auto& s : r.streams_of("bsn/raw")) {
-    RawTrack& t = out[s.key];
-    t.ts = r.read_u64(s, "timestamp_ns");
-    t.seq = r.read_u64(s, "seq");
-    t.acc = r.read_f64(s, "acc", 3);
-    t.gyr = r.read_f64(s, "gyr", 3);
-    t.mag = r.read_f64(s, "mag", 3);
-    t.channels = r.read_u32(s, "channels");
-  }
+  std::map<std::string, services::RawColumns> out;
+  for (const auto& s : r.streams_of("bsn/raw")) out[s.key] = services::read_raw_columns(r, s);
   return out;
 }
 
-std::uint64_t first_timestamp(const std::map<std::string, RawTrack>& tracks) {
+std::uint64_t first_timestamp(const std::map<std::string, services::RawColumns>& tracks) {
   std::uint64_t t0 = UINT64_MAX;
-  for (const auto& [node, t] : tracks) t0 = std::min(t0, t.ts.front());
+  for (const auto& [node, t] : tracks) t0 = std::min(t0, t.timestamp_ns.front());
   return t0;
 }
 
@@ -79,11 +66,11 @@ TEST_F(Replay, RecordReplayRecordIsBitIdentical) {
   const std::uint64_t t0a = first_timestamp(a), t0b = first_timestamp(b);
   for (const auto& [node, ta] : a) {
     ASSERT_TRUE(b.count(node)) << node;
-    const RawTrack& tb = b.at(node);
+    const services::RawColumns& tb = b.at(node);
     ASSERT_EQ(tb.seq.size(), ta.seq.size()) << node;
     for (std::size_t i = 0; i < ta.seq.size(); ++i) {
       ASSERT_EQ(tb.seq[i], ta.seq[i]) << node << " " << i;
-      ASSERT_EQ(tb.ts[i] - t0b, ta.ts[i] - t0a) << node << " " << i;
+      ASSERT_EQ(tb.timestamp_ns[i] - t0b, ta.timestamp_ns[i] - t0a) << node << " " << i;
       ASSERT_EQ(tb.channels[i], ta.channels[i]) << node << " " << i;
     }
     // Bit-identical values: compare the bytes, so even a NaN payload or a signed zero would count.
@@ -203,11 +190,11 @@ TEST_F(Replay, CsvWithNodeMapAndLoopKeepsIntervalsAndContinuesSequence) {
   const auto tracks = read_raw(out);
   ASSERT_EQ(tracks.size(), 1u);
   ASSERT_TRUE(tracks.count("thigh_l"));
-  const RawTrack& t = tracks.at("thigh_l");
+  const services::RawColumns& t = tracks.at("thigh_l");
   ASSERT_GT(t.seq.size(), 60u);  // more than three passes of 20 samples in about 1.7 s
   for (std::size_t i = 1; i < t.seq.size(); ++i) {
     ASSERT_EQ(t.seq[i], t.seq[i - 1] + 1) << i;
-    ASSERT_EQ(t.ts[i] - t.ts[i - 1], 10000000u) << i;  // 10 ms, across the loop's seam too
+    ASSERT_EQ(t.timestamp_ns[i] - t.timestamp_ns[i - 1], 10000000u) << i;  // 10 ms, across the loop's seam too
   }
 }
 

@@ -19,13 +19,10 @@
 
 namespace bsn::fusion {
 
-/// The complementary filter's parameters: own fields below; the rest bias low-pass, rest detection and the gap and
-/// start-up timing come from the base structs (documented there). During the start-up period (init_period_s) the tilt
-/// correction is not clipped.
-struct ComplementaryParams : GyroBiasLowPass::Params,
-                             MagDisturbanceDetector::Params,
-                             RestDetector::Params,
-                             FilterTimingParams {
+/// The complementary filter's parameters: own fields below; the rest bias low-pass and the magnetometer rejection with
+/// their switches, rest detection and the gap and start-up timing come from the base structs (documented there).
+/// During the start-up period (init_period_s) the tilt correction is not clipped.
+struct ComplementaryParams : GyroBiasRemovalParams, MagRejectionParams, RestDetector::Params, FilterTimingParams {
   /// Time constant of the tilt correction towards the accelerometer, s. Larger trusts the gyro longer
   /// (less sensitive to accelerations), smaller removes gyro drift faster. Default 2 s.
   double tau_acc_s = 2.0;
@@ -35,18 +32,11 @@ struct ComplementaryParams : GyroBiasLowPass::Params,
   /// (max_acc_error_rad) already bounds what one sample does, and the external acceleration of a sustained motion
   /// averages out while gravity does not, so skipping the accelerometer leaves the tilt to the gyro.
   double acc_rejection_m_s2 = 0.0;
-  /// 1 = skip the magnetometer while the shared disturbance detector flags it (mag_disturbance_detector.hpp), 0 =
-  /// always use it. Default 1: a magnet near the sensor otherwise turns the heading (Fan et al.'s test B).
-  double mag_rejection = 1.0;
   /// Largest angle between the estimated and the accelerometer's up that one tilt correction acts on, rad: the
   /// correction turns by gain_acc times min(angle, this); pi = unclipped. Default 0.05 rad (2.9 deg, seel_ruppin's
   /// value): between corrections the gyro drifts by far less, so a larger angle is external acceleration (1 g
   /// sideways shows as 45 deg), which the clip lets turn the estimate by at most max_acc_error_rad / tau_acc_s rad/s.
   double max_acc_error_rad = 0.05;
-  /// 1 = remove the gyro bias learned at rest by the low-pass of Fan et al. eqs. 11-12 (GyroBiasLowPass); 0 = raw
-  /// gyro (the plain filter). Default 1: a consumer gyro's bias of 0.5 deg/s otherwise leaves a standing error of
-  /// bias times tau.
-  double gyro_bias_lowpass = 1.0;
 };
 
 /// Everything the complementary filter keeps between samples.

@@ -50,7 +50,7 @@ struct SplitKalman {
 /// The DLKF's parameters: own fields below; R-adaption (its reference is the field at initialisation), rest flag and
 /// timing come from the base structs (documented there). max_gap_s must be <= 60 s. A restart after a gap keeps the
 /// low-pass bias.
-struct DlkfParams : RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
+struct DlkfParams : MagRejectionParams, RestDetector::Params, FilterTimingParams {
   /// Gyro noise density (global error, including scale and misalignment), rad/s per sqrt(Hz): the direction of each
   /// estimated vector diffuses with variance sigma_g^2 dt per step. Default 0.002, chosen with sigma_ext_acc on the
   /// eight BROAD trials: a good gyro is trusted for tens of seconds, the accelerometer mainly removes slow drift.

@@ -32,7 +32,7 @@ using Mat7 = Eigen::Matrix<double, 7, 7>;
 /// The EKF's parameters: own fields below; initial covariance, R-adaption, rest flag and timing come from the base
 /// structs (documented there). max_gap_s must be <= 60 s. A restart after a gap keeps the bias and its covariance block
 /// (see kalman_support::grow_over_gap).
-struct EkfParams : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
+struct EkfParams : KalmanInitParams, MagRejectionParams, RestDetector::Params, FilterTimingParams {
   /// Gyro white noise, rad/s per sqrt(Hz): the rotation-angle variance grows by sigma_g^2 * dt per step.
   /// Default 1e-3 (Nez Table 3, slow).
   double sigma_g = 1e-3;

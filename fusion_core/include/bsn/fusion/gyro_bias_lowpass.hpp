@@ -23,8 +23,9 @@ namespace bsn::fusion {
 
 class GyroBiasLowPass {
  public:
-  /// Low-pass bias parameters. The Params of Madgwick, IECF and Seel-Ruppin derive from this struct, so the field
-  /// names are the filter parameter names (bias_param_fields() lists them); DLKF keeps its own copy (see there).
+  /// Low-pass bias parameters. The Params of Seel-Ruppin and (through GyroBiasRemovalParams) of complementary,
+  /// Madgwick and IECF derive from this struct, so the field names are the filter parameter names
+  /// (bias_param_fields() lists them); DLKF keeps its own copy (see there).
   struct Params {
     /// Corner frequency f_c of the low-pass, Hz. Default 0.05 Hz (Fan et al.): time constant 3.2 s.
     double bias_corner_frequency_hz = 0.05;
@@ -99,5 +100,14 @@ constexpr std::array<ParamField<P>, 3> bias_param_fields() {
            {"bias_omega_min_rad_s", &P::bias_omega_min_rad_s},
            {"bias_min_static_s", &P::bias_min_static_s}}};
 }
+
+/// The gyro bias removal of a filter whose only bias estimate is the rest low-pass (complementary, madgwick, iecf),
+/// under its filter parameter names: the low-pass's parameters and the switch.
+struct GyroBiasRemovalParams : GyroBiasLowPass::Params {
+  /// 1 = remove the gyro bias learned at rest by the low-pass of Fan et al. eqs. 11-12; 0 = raw gyro (the plain
+  /// filter). Default 1: a consumer gyro's bias of 0.5 deg/s otherwise leaves a standing error of the bias times the
+  /// filter's correction time constant.
+  double gyro_bias_lowpass = 1.0;
+};
 
 }  // namespace bsn::fusion

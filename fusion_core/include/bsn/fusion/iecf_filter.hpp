@@ -23,16 +23,12 @@ namespace bsn::fusion {
 
 /// The IECF's parameters: own fields below, the shared groups from the base structs (documented there).
 /// init_period_s is also the length of the start-up gain ramp.
-struct IecfParams : GyroBiasLowPass::Params, MagDisturbanceDetector::Params, RestDetector::Params, FilterTimingParams {
+struct IecfParams : GyroBiasRemovalParams, MagRejectionParams, RestDetector::Params, FilterTimingParams {
   /// K: gain on the error after start-up, rad/s per unit error; the correction time constant is 1/K. Default 0.1
   /// (10 s), the optimum on the eight BROAD trials; Fan et al.'s 0.5 suits their sensors.
   double gain = 0.1;
   /// Gain right after (re)initialisation, ramping down to `gain` over init_period_s. Default 10.
   double initial_gain = 10.0;
-  /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
-  double gyro_bias_lowpass = 1.0;
-  /// 1 = skip the magnetometer while the disturbance detector flags it, 0 = always use it. Default 1.
-  double mag_rejection = 1.0;
 };
 
 /// Everything an IECF keeps between samples.

@@ -28,13 +28,11 @@ namespace bsn::fusion {
 /// The GDA's parameters: own fields below; the shared groups come from the base structs (documented there). Between
 /// readings of a magnetometer slower than the IMU, the 9D step uses the last reading turned by the gyro since then, for
 /// at most max_gap_s, so the heading gain does not drop with the magnetometer rate.
-struct MadgwickParams : GyroBiasLowPass::Params, RestDetector::Params, FilterTimingParams {
+struct MadgwickParams : GyroBiasRemovalParams, RestDetector::Params, FilterTimingParams {
   /// beta: magnitude of the gradient-descent step, rad/s (the quaternion rate of the correction; the orientation
   /// turns at up to 2 beta rad/s towards the measurements). Default 0.02, the optimum on the eight BROAD trials;
   /// Madgwick's and Fan et al.'s 0.1 suits their sensors.
   double beta = 0.02;
-  /// 1 = remove the gyro bias with the low-pass estimate (Fan eqs. 11-12), 0 = raw gyro. Default 1.
-  double gyro_bias_lowpass = 1.0;
 };
 
 /// Everything the GDA keeps between samples.

@@ -33,6 +33,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <string_view>
 
 #include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/imu_sample.hpp"
@@ -228,6 +229,28 @@ constexpr std::array<ParamField<P>, 11> mag_disturbance_param_fields() {
            {"mag_max_rejection_s", &P::mag_max_rejection_s},
            {"mag_accept_after_s", &P::mag_accept_after_s},
            {"mag_reduced_gain", &P::mag_reduced_gain}}};
+}
+
+/// The magnetometer rejection of a filter under its filter parameter names: the detector's thresholds and rules and
+/// the switch. The Params of every filter that rejects the magnetometer derive from it (seel_ruppin, iecf,
+/// complementary, and the Kalman filters through MagneticRAdaption).
+struct MagRejectionParams : MagDisturbanceDetector::Params {
+  /// 1 = the magnetometer is not used (a Kalman filter gives it infinite variance, Fan eq. 10) while the detector
+  /// flags the field; 0 = always use it (the papers' filters). Default 1: a magnet near the sensor otherwise turns
+  /// the heading (Fan et al.'s test B).
+  double mag_rejection = 1.0;
+
+  const MagDisturbanceDetector::Params& thresholds() const { return *this; }
+  /// Throws std::invalid_argument, naming `owner`, unless mag_rejection is 0 or 1 (the detector checks the
+  /// thresholds).
+  void check(std::string_view owner) const { require_switch(owner, mag_rejection, "mag_rejection"); }
+};
+
+/// The switch and the detector thresholds' entries of a filter's parameter table (P derives from MagRejectionParams).
+template <class P>
+constexpr std::array<ParamField<P>, 12> mag_rejection_param_fields() {
+  return join_param_fields<P>(std::array<ParamField<P>, 1>{{{"mag_rejection", &P::mag_rejection}}},
+                              mag_disturbance_param_fields<P>());
 }
 
 }  // namespace bsn::fusion

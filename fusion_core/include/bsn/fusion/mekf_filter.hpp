@@ -91,7 +91,7 @@ Mat6 process_noise(const Vec3& w, double T, double sigma_g, double sigma_bg);
 /// flag and timing come from the base structs (documented there). max_gap_s must be <= 60 s. A restart after a gap
 /// keeps the bias and its covariance block (see kalman_support::grow_over_gap) and starts again from the preset's noise
 /// set.
-struct MekfParams : KalmanInitParams, RAdaptionFilterParams, RestDetector::Params, FilterTimingParams {
+struct MekfParams : KalmanInitParams, MagRejectionParams, RestDetector::Params, FilterTimingParams {
   /// Table 3 set used for Q and R: 0 static, 1 slow, 2 intermediate, 3 fast. For "mekf_adaptive" the set it starts
   /// with. Default 3 (fast): Table 3 was identified on other sensors at 128 Hz and R is per sample, so the sets that
   /// trust the accelerometer more are too stiff at higher rates and in fast motion (the best on the BROAD trials).

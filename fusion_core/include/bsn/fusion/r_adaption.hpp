@@ -5,14 +5,9 @@
 // after a long rejection, which here multiplies the variance by 1 / mag_reduced_gain^2).
 #pragma once
 
-#include <array>
 #include <cstdint>
 #include <limits>
-#include <stdexcept>
-#include <string>
-#include <string_view>
 
-#include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/mag_disturbance_detector.hpp"
 #include "bsn/fusion/rotation.hpp"
 
@@ -54,26 +49,5 @@ class MagneticRAdaption {
   MagDisturbanceDetector detector_;
   Reference last_ref_;  ///< the reference last passed in (norm 0: none)
 };
-
-/// The R-adaption parameters of a Kalman filter under their filter parameter names (the Params of EKF, MEKF and
-/// DLKF derive from this struct; r_adaption_param_fields() lists the names): the shared detector's thresholds and
-/// rules (MagDisturbanceDetector::Params, meaning and defaults there) and the switch.
-struct RAdaptionFilterParams : MagDisturbanceDetector::Params {
-  /// 1 = infinite magnetometer variance (the magnetometer is ignored) while the field's magnitude or dip deviates
-  /// from the reference (Fan eq. 10); 0 = always use it (Fan's test B). Default 1.
-  double mag_rejection = 1.0;
-
-  const MagDisturbanceDetector::Params& thresholds() const { return *this; }
-  /// Throws std::invalid_argument, naming `owner`, unless mag_rejection is 0 or 1 (the detector checks the
-  /// thresholds).
-  void check(std::string_view owner) const { require_switch(owner, mag_rejection, "mag_rejection"); }
-};
-
-/// The R-adaption parameters' entries of a filter's parameter table (P derives from RAdaptionFilterParams).
-template <class P>
-constexpr std::array<ParamField<P>, 12> r_adaption_param_fields() {
-  return join_param_fields<P>(std::array<ParamField<P>, 1>{{{"mag_rejection", &P::mag_rejection}}},
-                              mag_disturbance_param_fields<P>());
-}
 
 }  // namespace bsn::fusion

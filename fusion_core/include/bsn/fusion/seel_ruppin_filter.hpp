@@ -24,7 +24,7 @@ namespace bsn::fusion {
 /// filter corrects the tilt without the clip and the heading with tau_acc if that is shorter than tau_mag, and learns
 /// no bias.
 struct SeelRuppinParams : GyroBiasLowPass::Params,
-                          MagDisturbanceDetector::Params,
+                          MagRejectionParams,
                           RestDetector::Params,
                           SensorFixedField::Params,
                           FilterTimingParams {
@@ -67,9 +67,6 @@ struct SeelRuppinParams : GyroBiasLowPass::Params,
   /// The bias estimate is clamped to this magnitude per axis, rad/s (a safety net against runaway on bad
   /// data). Default 0.1 rad/s (5.7 deg/s).
   double max_gyro_bias_rad_s = 0.1;
-  /// 1 = skip the magnetometer while the disturbance detector flags it; 0 = always use it (the paper's
-  /// filter). Default 1.
-  double mag_rejection = 1.0;
   /// The detector's reference field (magnitude and dip) is the mean over this long after the start-up, with the
   /// estimated vertical, s; the magnetometer is used unchecked meanwhile. One reading would carry its noise, and a
   /// start in motion its wrong vertical, into every later decision. Default 0.5 s: the detector goes on averaging
