@@ -104,7 +104,11 @@ inline bool acc_mag_usable(const Vec3& acc, const Vec3& mag) {
 /// lets it lose positive definiteness.
 template <class Mat>
 void condition_covariance(Mat& p, double min_variance, double max_variance) {
-  for (int j = 0; j < p.cols(); ++j) {
+  // Unrolled (a fixed-size P): the triangular loop otherwise costs more in counting than in arithmetic.
+  constexpr int n = Mat::ColsAtCompileTime;
+#pragma GCC unroll 16
+  for (int j = 0; j < n; ++j) {
+#pragma GCC unroll 16
     for (int i = 0; i < j; ++i) p(i, j) = p(j, i) = 0.5 * (p(i, j) + p(j, i));
     p(j, j) = std::clamp(p(j, j), min_variance, max_variance);
   }
