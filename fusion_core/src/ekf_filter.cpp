@@ -115,8 +115,10 @@ UpdateResult EkfFilter::start(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
+// Flattened: Eigen's small products in it (P's quaternion columns times h) are otherwise calls of their own, which
+// cost more than their 28 multiplications; inlining changes no arithmetic.
 template <int M>
-void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
+[[gnu::flatten]] void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
                         const Eigen::Matrix<double, M, 1>& variances, bool hold_bias) {
   // R is diagonal, so the M rows are processed one at a time against the same linearisation: this is the batch
   // Kalman update exactly (up to rounding) without forming or inverting S. H = [h_q 0] touches only the
