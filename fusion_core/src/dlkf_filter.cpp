@@ -107,7 +107,9 @@ void SplitKalman::predict(const Mat3& turn, double gyro_var_dt, double c, double
   const Vec3 v = x.head<3>();
   const Mat3 ta = turn * p.topLeftCorner<3, 3>();
   const double diagonal_noise = gyro_var_dt * v.squaredNorm() + kMinProcessVariance;
+#pragma GCC unroll 3
   for (int j = 0; j < 3; ++j) {
+#pragma GCC unroll 3
     for (int i = j; i < 3; ++i) {
       const double a_ij = ta.row(i).dot(turn.row(j)) - gyro_var_dt * v(i) * v(j) + (i == j ? diagonal_noise : 0.0);
       p(i, j) = a_ij;

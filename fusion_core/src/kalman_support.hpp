@@ -117,7 +117,9 @@ void condition_covariance(Mat& p, double min_variance, double max_variance) {
 /// Clamps the variances (diagonal) of a covariance that is symmetric by construction, see condition_covariance.
 template <class Mat>
 void clamp_variances(Mat& p, double min_variance, double max_variance) {
-  for (int i = 0; i < p.rows(); ++i) p(i, i) = std::clamp(p(i, i), min_variance, max_variance);
+  constexpr int n = Mat::RowsAtCompileTime;
+#pragma GCC unroll 16
+  for (int i = 0; i < n; ++i) p(i, i) = std::clamp(p(i, i), min_variance, max_variance);
 }
 
 /// Zero-rate update for a filter whose last three states are the gyro bias (sensor frame, rad/s): at rest the true
