@@ -115,9 +115,12 @@ UpdateResult EkfFilter::start(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
+// Flattened: Eigen's small products in it (P's quaternion columns times h) are otherwise calls of their own, which
+// cost more than their 28 multiplications; inlining changes no arithmetic.
 template <int M>
-void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual, const Eigen::Matrix<double, M, 4>& h_q,
-                        const Eigen::Matrix<double, M, 1>& variances, bool hold_bias) {
+[[gnu::flatten]] void EkfFilter::correct(const Eigen::Matrix<double, M, 1>& residual,
+                                         const Eigen::Matrix<double, M, 4>& h_q,
+                                         const Eigen::Matrix<double, M, 1>& variances, bool hold_bias) {
   // R is diagonal, so the M rows are processed one at a time against the same linearisation: this is the batch
   // Kalman update exactly (up to rounding) without forming or inverting S. H = [h_q 0] touches only the
   // quaternion columns of P. Each row: P <- P - (P h^T)(P h^T)^T / s, symmetric by construction.
@@ -171,7 +174,8 @@ UpdateResult EkfFilter::step(const ImuSample& s_in, double dt) {
   return UpdateResult::kUpdated;
 }
 
-void EkfFilter::predict(const ImuSample& s, double dt) {
+// Flattened as correct(): its small fixed-size products and helpers (xi, right_multiplication) inlined.
+[[gnu::flatten]] void EkfFilter::predict(const ImuSample& s, double dt) {
   // Prediction: q <- q (x) exp(w dt), b random walk; F and Q linearised at the new estimate. w is the mean of the
   // previous and the current bias-corrected rate: second-order accurate, where the current rate alone leaves an
   // apparent bias of half the angular acceleration times dt.
@@ -288,7 +292,8 @@ void EkfFilter::update_accelerometer_and_magnetometer(const ImuSample& s, const 
   }
 }
 
-void EkfFilter::project_covariance_to_unit_norm() {
+// Flattened as correct(): the 4x4 products and condition_covariance inlined.
+[[gnu::flatten]] void EkfFilter::project_covariance_to_unit_norm() {
   // The norm is not a degree of freedom: project the covariance onto the tangent space of the unit sphere,
   // J = diag(I - q q^T, I). With a = A q: J A J = A - q a^T - a q^T + (q^T a) q q^T, and J B = B - q (q^T B).
   const Eigen::Vector4d qv = as_vector(state_.q);

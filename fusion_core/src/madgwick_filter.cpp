@@ -91,7 +91,9 @@ UpdateResult MadgwickFilter::start(const ImuSample& s) {
   return UpdateResult::kInitialised;
 }
 
-UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
+// Flattened: the helpers it calls (series, rotations, the bias low-pass) are inlined into one function; inlining
+// changes no arithmetic.
+[[gnu::flatten]] UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
   Quat q = state_.q;
   // A held reading is used by a sample without magnetometer within max_gap_s of the last usable one.
   const bool hold =
@@ -177,7 +179,7 @@ UpdateResult MadgwickFilter::step(const ImuSample& s, double dt) {
   if (!std::isfinite(q.w() + q.x() + q.y() + q.z())) return UpdateResult::kRejected;
 
   state_.q = q;
-  state_.held_mag = held_mag;
+  if (use_magnetometer_) state_.held_mag = held_mag;  // (madgwick6 never holds one)
   if (with_mag) state_.held_mag_ns = s.timestamp_ns;
   if (use_magnetometer_ && s.has_mag && !with_mag) state_.held_mag_ns = 0;  // a bad reading ends the hold
   state_.flags.reinitialised = false;

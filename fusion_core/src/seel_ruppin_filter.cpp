@@ -277,7 +277,9 @@ Vec3 SeelRuppinFilter::mag_correction(const ImuSample& s, const Vec3& mag, const
   return rotation;
 }
 
-UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
+// Flattened: the helpers it calls (series, rotations, the magnetometer's lag compensation) are inlined into one
+// function; inlining changes no arithmetic.
+[[gnu::flatten]] UpdateResult SeelRuppinFilter::step(const ImuSample& s, double dt) {
   if (!physically_possible(s)) return UpdateResult::kRejected;
   state_.flags.reinitialised = false;
   state_.flags.mag_rejected = false;
