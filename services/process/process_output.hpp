@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "bsn/io/session_file.hpp"
@@ -40,15 +41,23 @@ class TopicOutput {
       s->cdr_bytes += payload_.length;
       s->buffers[kCdrEndColumn]->append_value(s->cdr_bytes);
     }
+    if constexpr (kColumnsOnly<T>) {
+      if (s->direct) return s->direct->append(sample);
+    }
     BufferAppendVisitor append(s->buffers.data(), serialised_ ? kFirstFieldColumn : kFirstFieldColumnWithoutCdr);
     visit_fields(sample, append);
   }
 
  private:
+  struct NoDirectColumns {
+    void append(const T&) const {}
+  };
+  using Direct = std::conditional_t<kColumnsOnly<T>, DirectColumns<T>, NoDirectColumns>;
   struct Stream {
     std::size_t id = 0;
     std::uint64_t cdr_bytes = 0;
     std::vector<io::ColumnBuffer*> buffers;  ///< its columns' buffers, in column order
+    std::optional<Direct> direct;            ///< a columns-only stream's field columns
   };
   Stream add_stream(const T& sample) {
     ColumnSpecVisitor spec(serialised_);
@@ -62,6 +71,12 @@ class TopicOutput {
     }
     s.id = writer_.add_stream(topic_, key.empty() ? "_" : key, type_.getName(), spec.specs, attributes);
     for (std::size_t c = 0; c < spec.specs.size(); ++c) s.buffers.push_back(&writer_.column_buffer(s.id, c));
+    if constexpr (kColumnsOnly<T>) {
+      if (!serialised_) {
+        ColumnBinder bind(spec.specs, s.buffers.data(), kFirstFieldColumnWithoutCdr);
+        s.direct.emplace(bind);
+      }
+    }
     return s;
   }
   io::SessionWriter& writer_;

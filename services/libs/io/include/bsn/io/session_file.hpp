@@ -46,9 +46,17 @@ class ColumnBuffer {
     std::memcpy(data_.get() + size_, data, bytes);
     size_ += bytes;
   }
+  /// append() of a size known when compiling: inlined to a few stores where append() would call memcpy.
+  template <std::size_t kBytes>
+  void append_fixed(const void* data) {
+    if (size_ + kBytes > capacity_) [[unlikely]]
+      grow(size_ + kBytes);
+    std::memcpy(data_.get() + size_, data, kBytes);
+    size_ += kBytes;
+  }
   template <class T>
   void append_value(const T& value) {
-    append(&value, sizeof value);
+    append_fixed<sizeof value>(&value);
   }
   const unsigned char* data() const { return data_.get(); }
   std::size_t size() const { return size_; }
