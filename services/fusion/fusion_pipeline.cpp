@@ -35,12 +35,16 @@ FusionPipeline::FusionPipeline(fusion::BodyModel body, const fusion::BodyFusion:
 
 const fusion::SampleResult& FusionPipeline::process(const bsn::RawSample& raw, std::uint64_t arrival_ns,
                                                     const fusion::SourceId& writer) {
-  const fusion::SampleResult& r =
-      fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, arrival_ns, writer);
+  return process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, arrival_ns, writer);
+}
+
+const fusion::SampleResult& FusionPipeline::process(const fusion::NodeSample& sample, std::uint64_t arrival_ns,
+                                                    const fusion::SourceId& writer) {
+  const fusion::SampleResult& r = fusion_.process(sample, arrival_ns, writer);
   if (r.outcome != fusion::SampleOutcome::kEstimated) return r;
   last_segment_ = r.segment;
-  fill_orientation(r, raw.timestamp_ns());
-  if (r.joint) fill_joint(*r.joint, raw.timestamp_ns());
+  fill_orientation(r, sample.imu.timestamp_ns);
+  if (r.joint) fill_joint(*r.joint, sample.imu.timestamp_ns);
   return r;
 }
 

@@ -26,6 +26,10 @@ class FusionPipeline {
   /// sample and, when it has a joint, joint() its bsn/joint_angles sample (valid until the next call).
   const fusion::SampleResult& process(const bsn::RawSample& raw, std::uint64_t arrival_ns,
                                       const fusion::SourceId& writer = {});
+  /// The same for a sample already in the fusion's form (dds::to_imu_sample of the raw sample; `bsn process` reads
+  /// its input into that form).
+  const fusion::SampleResult& process(const fusion::NodeSample& sample, std::uint64_t arrival_ns,
+                                      const fusion::SourceId& writer = {});
   const bsn::Orientation& orientation() const { return orientation_msgs_[last_segment_]; }
   const bsn::JointAngles& joint() const { return joint_msgs_[last_segment_]; }
 

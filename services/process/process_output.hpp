@@ -29,10 +29,19 @@ class TopicOutput {
   /// Streams are looked up by a small index the caller keeps (a segment), so a sample costs no string work. In a
   /// columns-only topic every sample of one index must have the texts of its first (FusionPipeline's outputs have
   /// their segment's or joint's, from the body), which the stream's attributes hold.
+  /// Room for `rows` more samples of the stream `index` will have, so that appending them copies no buffer
+  /// (effective once the stream exists, i.e. from its first sample on; before, it is noted for then).
+  void reserve(std::size_t index, std::size_t rows) {
+    if (index >= reserve_rows_.size()) reserve_rows_.resize(index + 1);
+    reserve_rows_[index] = rows;
+  }
   void write(std::size_t index, const T& sample, std::uint64_t arrival_ns) {
     if (index >= streams_.size()) streams_.resize(index + 1);
     auto& s = streams_[index];
-    if (!s) s = add_stream(sample);
+    if (!s) {
+      s = add_stream(sample);
+      if (index < reserve_rows_.size() && reserve_rows_[index] > 0) writer_.reserve(s->id, reserve_rows_[index]);
+    }
     s->buffers[kArrivalColumn]->append_value(arrival_ns);
     if (serialised_) {
       if (!type_.serialize(const_cast<T*>(&sample), &payload_))
@@ -85,6 +94,7 @@ class TopicOutput {
   PubSub type_;
   eprosima::fastrtps::rtps::SerializedPayload_t payload_{64 * 1024};  // larger than any bsn sample
   std::vector<std::optional<Stream>> streams_;
+  std::vector<std::size_t> reserve_rows_;
 };
 
 }  // namespace bsn::services::process_detail

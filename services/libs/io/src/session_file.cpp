@@ -223,6 +223,10 @@ ColumnBuffer& SessionWriter::column_buffer(std::size_t stream, std::size_t colum
   return streams_.at(stream)->columns.at(column).pending;
 }
 
+void SessionWriter::reserve(std::size_t stream, std::size_t rows) {
+  for (Column& c : streams_.at(stream)->columns) c.pending.reserve(rows * c.row_bytes());
+}
+
 void ColumnBuffer::grow(std::size_t at_least) {
   const std::size_t capacity = std::max<std::size_t>({at_least, 2 * capacity_, 4096});
   std::unique_ptr<unsigned char[]> data(new unsigned char[capacity]);
@@ -237,6 +241,8 @@ void SessionWriter::stage() {
     for (auto& c : s->columns) {
       // `staged` is empty here (write_staged clears it), so the swap hands over the data and keeps the capacity.
       c.staged.swap(c.pending);
+      // Bulk: the next block as large as this one gets the same room at once instead of growing into it.
+      if (layout_ == ChunkLayout::kBulk) c.pending.reserve(c.staged.size());
     }
     staged_streams_.push_back(s.get());
   }

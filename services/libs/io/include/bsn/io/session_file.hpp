@@ -58,6 +58,10 @@ class ColumnBuffer {
   void append_value(const T& value) {
     append_fixed<sizeof value>(&value);
   }
+  /// Room for `bytes` in all without another allocation.
+  void reserve(std::size_t bytes) {
+    if (bytes > capacity_) grow(bytes);
+  }
   const unsigned char* data() const { return data_.get(); }
   std::size_t size() const { return size_; }
   void clear() { size_ = 0; }
@@ -100,6 +104,9 @@ class SessionWriter {
   /// The buffer that append() fills for a column: appending whole rows to it is appending to the column. Valid as
   /// long as the writer; the same serialisation rules as append().
   ColumnBuffer& column_buffer(std::size_t stream, std::size_t column);
+  /// Room in every column of a stream for `rows` rows appended before the next stage(), so that appending them
+  /// copies no buffer.
+  void reserve(std::size_t stream, std::size_t rows);
   /// Hands what was appended so far to the next write_staged(). Cheap (swaps buffers).
   void stage();
   /// Writes what stage() handed over, then flushes the file to disk. Before writing it checks the free space
