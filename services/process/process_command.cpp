@@ -110,20 +110,26 @@ void write_truth(const ProcessInput& in, io::SessionWriter& writer) {
   TopicOutput<bsn::OrientationPubSubType> truth(writer, dds::kTruthOrientationTopic.name, !one_node_each);
   for (std::size_t i = 0; i < in.truth.size(); ++i) truth.write(index[i], in.truth[i], in.truth_arrival_ns[i]);
   // A recording's: one sample per segment whose texts are set once, its numbers made per row as the reading
-  // stored them.
+  // stored them. Written a segment and a block at a time, each stream's buffers given back when it is complete, so
+  // the truth never takes more memory than a block.
   TopicOutput<bsn::OrientationPubSubType> recorded(writer, dds::kTruthOrientationTopic.name, false);
   for (std::size_t k = 0; k < in.recorded_truth.size(); ++k) {
     const RecordedTruth& t = in.recorded_truth[k];
     bsn::Orientation o;
     o.segment(t.segment);
     o.node_id(t.node);
-    recorded.reserve(k, t.size());
+    recorded.reserve(k, std::min(t.size(), kBlockSamples));
     for (std::size_t i = 0; i < t.size(); ++i) {
       const double* q = &t.quat[4 * i];
       o.timestamp_ns(t.timestamp_ns[i]);
       dds::fill_orientation(fusion::Quat(q[0], q[1], q[2], q[3]).normalized(), o);
       recorded.write(k, o, t.timestamp_ns[i]);
+      if ((i + 1) % kBlockSamples == 0 || i + 1 == t.size()) {
+        writer.stage();
+        writer.write_staged();
+      }
     }
+    if (const auto id = recorded.stream_id(k)) writer.release(*id);
   }
 }
 

@@ -35,6 +35,11 @@ class TopicOutput {
     if (index >= reserve_rows_.size()) reserve_rows_.resize(index + 1);
     reserve_rows_[index] = rows;
   }
+  /// The writer's stream of `index`, if it has one yet.
+  std::optional<std::size_t> stream_id(std::size_t index) const {
+    if (index >= streams_.size() || !streams_[index]) return std::nullopt;
+    return streams_[index]->id;
+  }
   void write(std::size_t index, const T& sample, std::uint64_t arrival_ns) {
     if (index >= streams_.size()) streams_.resize(index + 1);
     auto& s = streams_[index];

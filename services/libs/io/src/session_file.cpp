@@ -227,6 +227,13 @@ void SessionWriter::reserve(std::size_t stream, std::size_t rows) {
   for (Column& c : streams_.at(stream)->columns) c.pending.reserve(rows * c.row_bytes());
 }
 
+void SessionWriter::release(std::size_t stream) {
+  for (Column& c : streams_.at(stream)->columns) {
+    c.pending.release();
+    c.staged.release();
+  }
+}
+
 void ColumnBuffer::grow(std::size_t at_least) {
   const std::size_t capacity = std::max<std::size_t>({at_least, 2 * capacity_, 4096});
   std::unique_ptr<unsigned char[]> data(new unsigned char[capacity]);

@@ -58,6 +58,11 @@ class ColumnBuffer {
   void append_value(const T& value) {
     append_fixed<sizeof value>(&value);
   }
+  /// Empties the buffer and gives its memory back.
+  void release() {
+    data_.reset();
+    size_ = capacity_ = 0;
+  }
   /// Room for `bytes` in all without another allocation.
   void reserve(std::size_t bytes) {
     if (bytes > capacity_) grow(bytes);
@@ -107,6 +112,9 @@ class SessionWriter {
   /// Room in every column of a stream for `rows` rows appended before the next stage(), so that appending them
   /// copies no buffer.
   void reserve(std::size_t stream, std::size_t rows);
+  /// Gives back the memory of a stream's buffers (a stream that gets no more samples, after write_staged()); what
+  /// was appended and not yet written is dropped.
+  void release(std::size_t stream);
   /// Hands what was appended so far to the next write_staged(). Cheap (swaps buffers).
   void stage();
   /// Writes what stage() handed over, then flushes the file to disk. Before writing it checks the free space
