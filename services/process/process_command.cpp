@@ -1,5 +1,7 @@
 #include "process_command.hpp"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -216,6 +218,11 @@ RunCounts run_events(const ProcessOptions& opt, const ProcessInput& in, const st
 }
 
 int process(const ProcessOptions& opt) {
+  // The input's arrays (tens of MB) are freed once read and the output's blocks allocated after: from the heap,
+  // not each its own mapping, the freed memory serves again instead of every new page costing a fault (about a
+  // quarter of the run's system time on 10 minutes of a 7-segment body).
+  mallopt(M_MMAP_THRESHOLD, 1 << 30);
+  mallopt(M_TRIM_THRESHOLD, 1 << 30);
   if (opt.calibrations != "first-sample" && opt.calibrations != "as-recorded")
     throw UsageError("--calibrations must be first-sample or as-recorded, not '" + opt.calibrations + "'");
   using Clock = std::chrono::steady_clock;
