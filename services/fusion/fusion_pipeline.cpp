@@ -1,5 +1,6 @@
 #include "fusion_pipeline.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "bsn/dds/conversions.hpp"
@@ -16,8 +17,9 @@ FusionPipeline::FusionPipeline(fusion::BodyModel body, const fusion::BodyFusion:
                                const fusion::BodyFusion::Params& params, std::uint64_t start_ns)
     : fusion_(std::move(body), calibrations, params, start_ns),
       calibration_id_(fusion_.body().segments.size()),
-      orientation_msgs_(fusion_.body().segments.size()),
-      joint_msgs_(fusion_.body().segments.size()) {
+      // At least one each, so that orientation() and joint() name a sample even before the first estimate.
+      orientation_msgs_(std::max<std::size_t>(1, fusion_.body().segments.size())),
+      joint_msgs_(std::max<std::size_t>(1, fusion_.body().segments.size())) {
   const auto& segments = fusion_.body().segments;
   for (std::size_t i = 0; i < segments.size(); ++i) {
     orientation_msgs_[i].segment(segments[i].name);
