@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 namespace bsn::fusion {
 namespace {
@@ -38,13 +39,18 @@ std::optional<AxisSequence> parse_axis_sequence(std::string_view text) {
   return seq;
 }
 
+namespace {
+
 // For R = R_i(a) R_j(b) R_k(c) with distinct i, j, k and s = +1 for a cyclic (i, j, k), -1 otherwise:
 //   sin b = s R(i,k),  a = atan2(-s R(j,k), R(k,k)),  c = atan2(-s R(i,j), R(i,i)).
 // The five elements come straight from the quaternion, R = ((w^2 - |v|^2) I + 2 v v^T + 2 w [v]x) / |q|^2, without
-// building the matrix: the joint angles decompose every joint sample twice.
-Vec3 decompose(const Quat& q, const AxisSequence& seq) {
-  const int i = seq.axes[0], j = seq.axes[1], k = seq.axes[2];
-  const double s = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
+// building the matrix: the joint angles decompose every joint sample twice, and every orientation has its yaw,
+// pitch and roll. One instance per sequence, so the indices and signs are constants and only the arithmetic is left.
+template <int i, int j, int k>
+Vec3 decompose_sequence(const Quat& q) {
+  // (a, b, 3 - a - b) is a cyclic order of (x, y, z): (b - a) mod 3 == 1.
+  constexpr auto cyclic = [](int a, int b) { return (b - a + 3) % 3 == 1; };
+  constexpr double s = cyclic(i, j) ? 1.0 : -1.0;
   const double w = q.w();
   const double v[3] = {q.x(), q.y(), q.z()};
   const double n2 = w * w + v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
@@ -53,7 +59,7 @@ Vec3 decompose(const Quat& q, const AxisSequence& seq) {
   auto element = [&](int a, int b) {
     if (a == b) return diag + 2.0 * v[a] * v[a];
     const int c = 3 - a - b;
-    const double cross = ((b - a + 3) % 3 == 1) ? -v[c] : v[c];
+    const double cross = cyclic(a, b) ? -v[c] : v[c];
     return 2.0 * (v[a] * v[b] + w * cross);
   };
   const double sb = std::clamp(s * element(i, k) / n2, -1.0, 1.0);
@@ -71,6 +77,27 @@ Vec3 decompose(const Quat& q, const AxisSequence& seq) {
     c = std::atan2(-s * element(i, j), element(i, i));
   }
   return {a, b, c};
+}
+
+}  // namespace
+
+Vec3 decompose(const Quat& q, const AxisSequence& seq) {
+  switch (seq.axes[0] * 9 + seq.axes[1] * 3 + seq.axes[2]) {
+    case 0 * 9 + 1 * 3 + 2:
+      return decompose_sequence<0, 1, 2>(q);
+    case 0 * 9 + 2 * 3 + 1:
+      return decompose_sequence<0, 2, 1>(q);
+    case 1 * 9 + 0 * 3 + 2:
+      return decompose_sequence<1, 0, 2>(q);
+    case 1 * 9 + 2 * 3 + 0:
+      return decompose_sequence<1, 2, 0>(q);
+    case 2 * 9 + 0 * 3 + 1:
+      return decompose_sequence<2, 0, 1>(q);
+    case 2 * 9 + 1 * 3 + 0:
+      return decompose_sequence<2, 1, 0>(q);
+  }
+  // Not three distinct axes: parse_axis_sequence refuses them, so only code can make one.
+  throw std::invalid_argument("decompose: an axis sequence needs three distinct axes, not " + seq.name());
 }
 
 Quat compose(const Vec3& angles, const AxisSequence& seq) {

@@ -1,5 +1,6 @@
 #include "fusion_pipeline.hpp"
 
+#include <algorithm>
 #include <cmath>
 
 #include "bsn/dds/conversions.hpp"
@@ -14,17 +15,38 @@ std::uint32_t to_wire_flags(const fusion::FilterFlags& f) {
 
 FusionPipeline::FusionPipeline(fusion::BodyModel body, const fusion::BodyFusion::Calibrations& calibrations,
                                const fusion::BodyFusion::Params& params, std::uint64_t start_ns)
-    : fusion_(std::move(body), calibrations, params, start_ns), calibration_id_(fusion_.body().segments.size()) {
-  for (const fusion::SegmentSpec& s : fusion_.body().segments) joint_names_.push_back(fusion::joint_name(s));
+    : fusion_(std::move(body), calibrations, params, start_ns),
+      calibration_id_(fusion_.body().segments.size()),
+      // At least one each, so that orientation() and joint() name a sample even before the first estimate.
+      orientation_msgs_(std::max<std::size_t>(1, fusion_.body().segments.size())),
+      joint_msgs_(std::max<std::size_t>(1, fusion_.body().segments.size())) {
+  const auto& segments = fusion_.body().segments;
+  for (std::size_t i = 0; i < segments.size(); ++i) {
+    orientation_msgs_[i].segment(segments[i].name);
+    orientation_msgs_[i].node_id(segments[i].node);
+    const std::optional<std::size_t> parent = fusion_.segment(i).parent;
+    if (!parent) continue;
+    bsn::JointAngles& j = joint_msgs_[i];
+    j.joint(fusion::joint_name(segments[i]));
+    j.parent(segments[*parent].name);
+    j.child(segments[i].name);
+    j.axes(segments[i].joint_axes.name());
+    dds::fill_anatomical(fusion_.segment(i).convention, fusion::Vec3::Zero(), j);
+  }
 }
 
 const fusion::SampleResult& FusionPipeline::process(const bsn::RawSample& raw, std::uint64_t arrival_ns,
                                                     const fusion::SourceId& writer) {
-  const fusion::SampleResult& r =
-      fusion_.process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, arrival_ns, writer);
+  return process({raw.node_id(), raw.seq(), dds::to_imu_sample(raw)}, arrival_ns, writer);
+}
+
+const fusion::SampleResult& FusionPipeline::process(const fusion::NodeSample& sample, std::uint64_t arrival_ns,
+                                                    const fusion::SourceId& writer) {
+  const fusion::SampleResult& r = fusion_.process(sample, arrival_ns, writer);
   if (r.outcome != fusion::SampleOutcome::kEstimated) return r;
-  fill_orientation(r, raw.timestamp_ns());
-  if (r.joint) fill_joint(*r.joint, raw.timestamp_ns());
+  last_segment_ = r.segment;
+  fill_orientation(r, sample.imu.timestamp_ns);
+  if (r.joint) fill_joint(*r.joint, sample.imu.timestamp_ns);
   return r;
 }
 
@@ -110,10 +132,7 @@ bsn::NodeStatus FusionPipeline::node_status(std::size_t i) const {
 }
 
 void FusionPipeline::fill_orientation(const fusion::SampleResult& r, std::uint64_t timestamp_ns) {
-  const fusion::SegmentSpec& spec = fusion_.body().segments[r.segment];
-  bsn::Orientation& o = orientation_msg_;
-  o.segment(spec.name);
-  o.node_id(spec.node);
+  bsn::Orientation& o = orientation_msgs_[r.segment];
   o.timestamp_ns(timestamp_ns);
   dds::fill_orientation(r.orientation, o);
   o.gyro_bias({r.gyro_bias.x(), r.gyro_bias.y(), r.gyro_bias.z()});
@@ -121,18 +140,14 @@ void FusionPipeline::fill_orientation(const fusion::SampleResult& r, std::uint64
 }
 
 void FusionPipeline::fill_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns) {
-  const fusion::SegmentSpec& child = fusion_.body().segments[joint.child];
-  bsn::JointAngles& j = joint_msg_;
-  j.joint(joint_names_[joint.child]);
-  j.parent(fusion_.body().segments[joint.parent].name);
-  j.child(child.name);
+  // The texts were set from the body; a segment's joint is always to its parent, with its convention.
+  bsn::JointAngles& j = joint_msgs_[joint.child];
   j.timestamp_ns(timestamp_ns);
   j.quat(dds::to_wxyz(joint.relative));
-  j.axes(child.joint_axes.name());
   j.angles({joint.angles.x(), joint.angles.y(), joint.angles.z()});
   j.flags((joint.stale ? bsn::FLAG_STALE : 0u) | (joint.initialising ? bsn::FLAG_INITIALISING : 0u) |
           (joint.aligned ? bsn::FLAG_SEGMENT_FRAME : 0u) | (joint.heading ? bsn::FLAG_HEADING_KINEMATIC : 0u));
-  dds::fill_anatomical(joint.convention, joint.anatomical, j);
+  j.anatomical({joint.anatomical.x(), joint.anatomical.y(), joint.anatomical.z()});
   j.heading_offset(joint.heading ? joint.heading->offset_rad : 0.0);
   j.heading_observability(joint.heading ? joint.heading->observability : 0.0);
 }

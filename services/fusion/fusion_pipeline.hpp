@@ -26,8 +26,12 @@ class FusionPipeline {
   /// sample and, when it has a joint, joint() its bsn/joint_angles sample (valid until the next call).
   const fusion::SampleResult& process(const bsn::RawSample& raw, std::uint64_t arrival_ns,
                                       const fusion::SourceId& writer = {});
-  const bsn::Orientation& orientation() const { return orientation_msg_; }
-  const bsn::JointAngles& joint() const { return joint_msg_; }
+  /// The same for a sample already in the fusion's form (dds::to_imu_sample of the raw sample; `bsn process` reads
+  /// its input into that form).
+  const fusion::SampleResult& process(const fusion::NodeSample& sample, std::uint64_t arrival_ns,
+                                      const fusion::SourceId& writer = {});
+  const bsn::Orientation& orientation() const { return orientation_msgs_[last_segment_]; }
+  const bsn::JointAngles& joint() const { return joint_msgs_[last_segment_]; }
 
   enum class CalibrationOutcome {
     kApplied,         ///< applied from the node's next sample on
@@ -61,12 +65,14 @@ class FusionPipeline {
   void fill_joint(const fusion::JointEstimate& joint, std::uint64_t timestamp_ns);
 
   fusion::BodyFusion fusion_;
-  std::vector<std::string> joint_names_;  ///< per segment, so that a joint sample allocates nothing
   std::vector<std::string> calibration_id_;
   std::map<std::pair<std::size_t, int>, std::string> applied_calibration_;  ///< per (segment, kind): request id
   std::string last_calibration_id_;
-  bsn::Orientation orientation_msg_;
-  bsn::JointAngles joint_msg_;
+  // One output sample per segment (its joint: the joint to its parent), its texts (names from the body, the joint's
+  // axes and anatomy) set once here: a sample only sets numbers, so it neither allocates nor copies a string.
+  std::vector<bsn::Orientation> orientation_msgs_;
+  std::vector<bsn::JointAngles> joint_msgs_;
+  std::size_t last_segment_ = 0;  ///< of the last estimate
 };
 
 /// The wire flags of a filter's flags (bsn::FLAG_RESTING, ...).

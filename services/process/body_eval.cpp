@@ -88,6 +88,11 @@ EvalSeries collect_series(const BodyEvalOptions& opt, const ProcessOptions& p, c
     const auto seg = body.find_segment(o.segment());
     if (seg) truth[*seg][o.timestamp_ns()] = dds::to_quat(o.quat());
   }
+  for (const RecordedTruth& t : in.recorded_truth) {
+    const auto seg = body.find_segment(t.segment);
+    if (!seg) continue;
+    for (std::size_t i = 0; i < t.size(); ++i) truth[*seg][t.timestamp_ns[i]] = truth_quat(t, i);
+  }
   const std::vector<Event> events =
       merge_events(in, p.order.empty() ? (in.session ? "arrival" : "time") : p.order, false);
   FusionPipeline pipeline(
@@ -292,7 +297,7 @@ int body_eval(const BodyEvalOptions& opt) {
   std::vector<std::string> notes;
   fusion::BodyModel body;
   ProcessInput in = load_input(p, body, notes);
-  if (in.truth.empty())
+  if (in.truth.empty() && in.recorded_truth.empty())
     throw UsageError(opt.input + ": no reference orientation (opt_quat, or bsn/truth/orientation) to score against");
   const EvalSeries series = collect_series(opt, p, body, in);
   const std::vector<fusion::Quat> alignment = fit_alignment(series, window);

@@ -1,6 +1,7 @@
 #include "process_input.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <iterator>
 
@@ -64,10 +65,6 @@ std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const f
   };
   std::vector<std::string> left_out;
   std::vector<io::ImportedNode> nodes = io::import_recordings(opt.input, opt.import.format, import, wanted, &left_out);
-  std::size_t samples = 0;
-  for (const io::ImportedNode& n : nodes) samples += n.rec.size();
-  in.truth.reserve(samples);
-  in.truth_arrival_ns.reserve(samples);
   for (std::size_t i = 0; i < body.segments.size(); ++i) {
     const fusion::SegmentSpec& spec = body.segments[i];
     auto it = std::find_if(nodes.begin(), nodes.end(), [&](const io::ImportedNode& n) { return n.name == spec.node; });
@@ -82,29 +79,34 @@ std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const f
     t.node = spec.node;
     t.segment = i;
     const std::size_t n = rec.size();
-    t.resize(n);
+    // Column by column from the recording's row-major N x 3 arrays, the values Recording::sample gives.
+    t.timestamp_ns.resize(n);
+    t.seq.resize(n);
+    t.channels.resize(n);
+    t.acc.assign(rec.acc.data(), rec.acc.data() + 3 * n);
+    t.gyr.assign(rec.gyr.data(), rec.gyr.data() + 3 * n);
+    t.mag.assign(rec.mag.data(), rec.mag.data() + 3 * n);
     for (std::size_t k = 0; k < n; ++k) {
-      const fusion::ImuSample s = rec.sample(k);
-      t.timestamp_ns[k] = s.timestamp_ns;
+      t.timestamp_ns[k] = rec.time_ns(k);
       t.seq[k] = k;
-      for (int c = 0; c < 3; ++c) {
-        t.acc[3 * k + c] = s.acc[c];
-        t.gyr[3 * k + c] = s.gyr[c];
-        t.mag[3 * k + c] = s.has_mag ? s.mag[c] : 0.0;
-      }
-      t.channels[k] = (s.has_acc ? bsn::CHANNEL_ACC : 0u) | (s.has_gyr ? bsn::CHANNEL_GYR : 0u) |
-                      (s.has_mag ? bsn::CHANNEL_MAG : 0u);
-      if (rec.opt_quat.rows() == static_cast<Eigen::Index>(n) &&
-          rec.opt_quat.row(static_cast<Eigen::Index>(k)).allFinite()) {
-        bsn::Orientation o;
-        o.segment(spec.name);
-        o.node_id(spec.node);
-        o.timestamp_ns(s.timestamp_ns);
+      double* m = &t.mag[3 * k];
+      const bool has_mag = !(std::isnan(m[0]) && std::isnan(m[1]) && std::isnan(m[2]));
+      if (!has_mag) m[0] = m[1] = m[2] = 0.0;
+      t.channels[k] = bsn::CHANNEL_ACC | bsn::CHANNEL_GYR | (has_mag ? bsn::CHANNEL_MAG : 0u);
+    }
+    if (rec.opt_quat.rows() == static_cast<Eigen::Index>(n)) {
+      RecordedTruth truth;
+      truth.segment = spec.name;
+      truth.node = spec.node;
+      truth.timestamp_ns.reserve(n);
+      truth.quat.reserve(4 * n);
+      for (std::size_t k = 0; k < n; ++k) {
         const auto q = rec.opt_quat.row(static_cast<Eigen::Index>(k));
-        dds::fill_orientation(fusion::Quat(q[0], q[1], q[2], q[3]).normalized(), o);
-        in.truth.push_back(std::move(o));
-        in.truth_arrival_ns.push_back(s.timestamp_ns);
+        if (!q.allFinite()) continue;
+        truth.timestamp_ns.push_back(t.timestamp_ns[k]);
+        truth.quat.insert(truth.quat.end(), q.data(), q.data() + 4);
       }
+      if (truth.size() > 0) in.recorded_truth.push_back(std::move(truth));
     }
     t.arrival_ns = t.timestamp_ns;
     in.tracks.push_back(std::move(t));
@@ -242,6 +244,23 @@ void fill_raw(const NodeTrack& t, std::size_t i, bsn::RawSample& raw) {
   raw.gyr({t.gyr[3 * i], t.gyr[3 * i + 1], t.gyr[3 * i + 2]});
   raw.mag({t.mag[3 * i], t.mag[3 * i + 1], t.mag[3 * i + 2]});
   raw.channels(t.channels[i]);
+}
+
+fusion::ImuSample imu_sample(const NodeTrack& t, std::size_t i) {
+  fusion::ImuSample s;
+  s.timestamp_ns = t.timestamp_ns[i];
+  s.acc = fusion::Vec3(t.acc[3 * i], t.acc[3 * i + 1], t.acc[3 * i + 2]);
+  s.gyr = fusion::Vec3(t.gyr[3 * i], t.gyr[3 * i + 1], t.gyr[3 * i + 2]);
+  s.mag = fusion::Vec3(t.mag[3 * i], t.mag[3 * i + 1], t.mag[3 * i + 2]);
+  s.has_acc = (t.channels[i] & bsn::CHANNEL_ACC) != 0;
+  s.has_gyr = (t.channels[i] & bsn::CHANNEL_GYR) != 0;
+  s.has_mag = (t.channels[i] & bsn::CHANNEL_MAG) != 0;
+  return s;
+}
+
+fusion::Quat truth_quat(const RecordedTruth& t, std::size_t i) {
+  const double* q = &t.quat[4 * i];
+  return fusion::canonical(fusion::Quat(q[0], q[1], q[2], q[3]).normalized());
 }
 
 }  // namespace bsn::services::process_detail

@@ -31,12 +31,22 @@ struct TimedCalibration {
   bsn::CalibrationResult result;
 };
 
+/// One segment's reference orientations from a recording, as read: bsn/truth/orientation's samples are made of them
+/// when written (time = arrival, the quaternion normalised, gyro bias and flags 0), so reading builds no sample.
+struct RecordedTruth {
+  std::string segment, node;
+  std::vector<std::uint64_t> timestamp_ns;
+  std::vector<double> quat;  ///< w, x, y, z per sample, as recorded (finite)
+  std::size_t size() const { return timestamp_ns.size(); }
+};
+
 struct ProcessInput {
   std::vector<NodeTrack> tracks;
   std::vector<TimedCalibration> calibrations;  ///< from a session's bsn/calibration/result, in arrival order
-  std::vector<bsn::Orientation> truth;         ///< bsn/truth/orientation to carry over
+  std::vector<bsn::Orientation> truth;         ///< a session's bsn/truth/orientation, to carry over as it was
   std::vector<std::uint64_t> truth_arrival_ns;
-  std::string recorded_body;  ///< a session's body_model attribute
+  std::vector<RecordedTruth> recorded_truth;  ///< recordings' reference orientations, per segment in body order
+  std::string recorded_body;                  ///< a session's body_model attribute
   bool session = false;
 };
 
@@ -58,5 +68,11 @@ std::vector<Event> merge_events(const ProcessInput& in, const std::string& order
 
 /// Sample `i` of a track as the raw sample a node publishes (its node id is left as it is).
 void fill_raw(const NodeTrack& t, std::size_t i, bsn::RawSample& raw);
+/// Sample `i` of a track as the fusion takes it: the same as dds::to_imu_sample of fill_raw's sample.
+fusion::ImuSample imu_sample(const NodeTrack& t, std::size_t i);
+
+/// A recording's reference orientation as its bsn/truth/orientation sample has it: normalised, then canonical
+/// (dds::fill_orientation).
+fusion::Quat truth_quat(const RecordedTruth& t, std::size_t i);
 
 }  // namespace bsn::services::process_detail

@@ -126,7 +126,10 @@ class BroadImporter final : public RecordingImporter {
  public:
   std::string name() const override { return "broad-hdf5"; }
   std::vector<ImportedNode> read(const std::string& path, const ImportOptions&) const override {
-    return {{stem_of(path), read_broad_hdf5(path)}};
+    std::vector<ImportedNode> nodes(1);  // not a braced list: its elements would be copied, arrays and all
+    nodes[0].name = stem_of(path);
+    nodes[0].rec = read_broad_hdf5(path);
+    return nodes;
   }
   std::vector<ImportedNode> parse(std::string_view, const std::string& source, const ImportOptions&) const override {
     throw IoError(source + ": BROAD HDF5 is read from files only");

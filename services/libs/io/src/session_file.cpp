@@ -223,6 +223,17 @@ ColumnBuffer& SessionWriter::column_buffer(std::size_t stream, std::size_t colum
   return streams_.at(stream)->columns.at(column).pending;
 }
 
+void SessionWriter::reserve(std::size_t stream, std::size_t rows) {
+  for (Column& c : streams_.at(stream)->columns) c.pending.reserve(rows * c.row_bytes());
+}
+
+void SessionWriter::release(std::size_t stream) {
+  for (Column& c : streams_.at(stream)->columns) {
+    c.pending.release();
+    c.staged.release();
+  }
+}
+
 void ColumnBuffer::grow(std::size_t at_least) {
   const std::size_t capacity = std::max<std::size_t>({at_least, 2 * capacity_, 4096});
   std::unique_ptr<unsigned char[]> data(new unsigned char[capacity]);
@@ -237,6 +248,8 @@ void SessionWriter::stage() {
     for (auto& c : s->columns) {
       // `staged` is empty here (write_staged clears it), so the swap hands over the data and keeps the capacity.
       c.staged.swap(c.pending);
+      // Bulk: the next block as large as this one gets the same room at once instead of growing into it.
+      if (layout_ == ChunkLayout::kBulk) c.pending.reserve(c.staged.size());
     }
     staged_streams_.push_back(s.get());
   }
@@ -269,8 +282,17 @@ void SessionWriter::create_stream(Stream& s) {
     H5Pset_chunk(dcpl.get(), rank, chunk);
     // A chunk cache for the chunk being filled and no more: the default (1 MiB per dataset) keeps every chunk
     // written, and a 64-segment body's thousands of datasets then grow the recorder by megabytes a second.
+    std::size_t cache_bytes = 2 * chunk[0] * chunk[1] * column_type_size(c.spec.type);
+    if (layout_ == ChunkLayout::kBulk) {
+      // Bulk: no chunk cache and no fill value, so HDF5 writes each block from the caller's buffer straight into
+      // the file (H5D__chunk_cacheable: a chunk larger than the cache, with nothing to fill, bypasses it) instead
+      // of filling a cached chunk with the fill value, copying the block into it and writing that. Every row up to
+      // the dataset's extent is written, so no reader sees an unfilled byte.
+      H5Pset_fill_time(dcpl.get(), H5D_FILL_TIME_NEVER);
+      cache_bytes = 0;
+    }
     Handle dapl(H5Pcreate(H5P_DATASET_ACCESS), H5Pclose);
-    H5Pset_chunk_cache(dapl.get(), 11, 2 * chunk[0] * chunk[1] * column_type_size(c.spec.type), 1.0);
+    H5Pset_chunk_cache(dapl.get(), 11, cache_bytes, 1.0);
     c.dataset = Handle(H5Dcreate2(s.group.get(), c.spec.name.c_str(), file_type(c.spec.type), space.get(), H5P_DEFAULT,
                                   dcpl.get(), dapl.get()),
                        H5Dclose);

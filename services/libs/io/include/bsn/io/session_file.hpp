@@ -46,9 +46,26 @@ class ColumnBuffer {
     std::memcpy(data_.get() + size_, data, bytes);
     size_ += bytes;
   }
+  /// append() of a size known when compiling: inlined to a few stores where append() would call memcpy.
+  template <std::size_t kBytes>
+  void append_fixed(const void* data) {
+    if (size_ + kBytes > capacity_) [[unlikely]]
+      grow(size_ + kBytes);
+    std::memcpy(data_.get() + size_, data, kBytes);
+    size_ += kBytes;
+  }
   template <class T>
   void append_value(const T& value) {
-    append(&value, sizeof value);
+    append_fixed<sizeof value>(&value);
+  }
+  /// Empties the buffer and gives its memory back.
+  void release() {
+    data_.reset();
+    size_ = capacity_ = 0;
+  }
+  /// Room for `bytes` in all without another allocation.
+  void reserve(std::size_t bytes) {
+    if (bytes > capacity_) grow(bytes);
   }
   const unsigned char* data() const { return data_.get(); }
   std::size_t size() const { return size_; }
@@ -92,6 +109,12 @@ class SessionWriter {
   /// The buffer that append() fills for a column: appending whole rows to it is appending to the column. Valid as
   /// long as the writer; the same serialisation rules as append().
   ColumnBuffer& column_buffer(std::size_t stream, std::size_t column);
+  /// Room in every column of a stream for `rows` rows appended before the next stage(), so that appending them
+  /// copies no buffer.
+  void reserve(std::size_t stream, std::size_t rows);
+  /// Gives back the memory of a stream's buffers (a stream that gets no more samples, after write_staged()); what
+  /// was appended and not yet written is dropped.
+  void release(std::size_t stream);
   /// Hands what was appended so far to the next write_staged(). Cheap (swaps buffers).
   void stage();
   /// Writes what stage() handed over, then flushes the file to disk. Before writing it checks the free space
