@@ -8,6 +8,7 @@
 #include <map>
 #include <numbers>
 #include <optional>
+#include <string_view>
 
 #include "bsn/config/body_config.hpp"
 #include "bsn/config/calibration_file.hpp"
@@ -108,8 +109,8 @@ EvalSeries collect_series(const BodyEvalOptions& opt, const ProcessOptions& p, c
   auto& seg_truth = out.seg_truth;
   auto& seg_t = out.seg_t;
   auto& joints = out.joints;
-  std::vector<bsn::RawSample> raws(in.tracks.size());
-  for (std::size_t k = 0; k < in.tracks.size(); ++k) raws[k].node_id(body.segments[in.tracks[k].segment].node);
+  std::vector<std::string_view> node(in.tracks.size());
+  for (std::size_t k = 0; k < in.tracks.size(); ++k) node[k] = body.segments[in.tracks[k].segment].node;
   std::optional<std::uint64_t> t0;
   auto frame_of = [&](std::size_t segment, const fusion::Quat& q_sensor, bool aligned) {
     return aligned ? fusion::segment_orientation(q_sensor, pipeline.fusion().segment(segment).sensor_to_segment)
@@ -118,10 +119,8 @@ EvalSeries collect_series(const BodyEvalOptions& opt, const ProcessOptions& p, c
   for (const Event& ev : events) {
     const NodeTrack& t = in.tracks[ev.track];
     const std::size_t i = ev.index;
-    bsn::RawSample& raw = raws[ev.track];
-    fill_raw(t, i, raw);
     if (!t0) t0 = t.timestamp_ns[i];
-    const fusion::SampleResult& r = pipeline.process(raw, t.timestamp_ns[i]);
+    const fusion::SampleResult& r = pipeline.process({node[ev.track], t.seq[i], imu_sample(t, i)}, t.timestamp_ns[i]);
     if (r.outcome != fusion::SampleOutcome::kEstimated) continue;
     const auto truth_now = truth[r.segment].find(t.timestamp_ns[i]);
     if (truth_now == truth[r.segment].end()) continue;

@@ -1,7 +1,6 @@
 #include "process_input.hpp"
 
 #include <algorithm>
-#include <cmath>
 #include <filesystem>
 #include <iterator>
 
@@ -89,9 +88,8 @@ std::string read_recordings(const ProcessOptions& opt, ProcessInput& in, const f
     for (std::size_t k = 0; k < n; ++k) {
       t.timestamp_ns[k] = rec.time_ns(k);
       t.seq[k] = k;
-      double* m = &t.mag[3 * k];
-      const bool has_mag = !(std::isnan(m[0]) && std::isnan(m[1]) && std::isnan(m[2]));
-      if (!has_mag) m[0] = m[1] = m[2] = 0.0;
+      const bool has_mag = rec.has_mag(k);
+      if (!has_mag) std::fill_n(&t.mag[3 * k], 3, 0.0);
       t.channels[k] = bsn::CHANNEL_ACC | bsn::CHANNEL_GYR | (has_mag ? bsn::CHANNEL_MAG : 0u);
     }
     if (rec.opt_quat.rows() == static_cast<Eigen::Index>(n)) {
@@ -247,15 +245,7 @@ void fill_raw(const NodeTrack& t, std::size_t i, bsn::RawSample& raw) {
 }
 
 fusion::ImuSample imu_sample(const NodeTrack& t, std::size_t i) {
-  fusion::ImuSample s;
-  s.timestamp_ns = t.timestamp_ns[i];
-  s.acc = fusion::Vec3(t.acc[3 * i], t.acc[3 * i + 1], t.acc[3 * i + 2]);
-  s.gyr = fusion::Vec3(t.gyr[3 * i], t.gyr[3 * i + 1], t.gyr[3 * i + 2]);
-  s.mag = fusion::Vec3(t.mag[3 * i], t.mag[3 * i + 1], t.mag[3 * i + 2]);
-  s.has_acc = (t.channels[i] & bsn::CHANNEL_ACC) != 0;
-  s.has_gyr = (t.channels[i] & bsn::CHANNEL_GYR) != 0;
-  s.has_mag = (t.channels[i] & bsn::CHANNEL_MAG) != 0;
-  return s;
+  return dds::to_imu_sample(t.timestamp_ns[i], &t.acc[3 * i], &t.gyr[3 * i], &t.mag[3 * i], t.channels[i]);
 }
 
 fusion::Quat truth_quat(const RecordedTruth& t, std::size_t i) {

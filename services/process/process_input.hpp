@@ -68,7 +68,7 @@ std::vector<Event> merge_events(const ProcessInput& in, const std::string& order
 
 /// Sample `i` of a track as the raw sample a node publishes (its node id is left as it is).
 void fill_raw(const NodeTrack& t, std::size_t i, bsn::RawSample& raw);
-/// Sample `i` of a track as the fusion takes it: the same as dds::to_imu_sample of fill_raw's sample.
+/// Sample `i` of a track as the fusion takes it (dds::to_imu_sample, as of fill_raw's sample).
 fusion::ImuSample imu_sample(const NodeTrack& t, std::size_t i);
 
 /// A recording's reference orientation as its bsn/truth/orientation sample has it: normalised, then canonical

@@ -26,9 +26,6 @@ class TopicOutput {
   /// serialised: each sample also as CDR (a topic whose texts may differ between the samples of one key).
   TopicOutput(io::SessionWriter& writer, const char* topic, bool serialised = !kColumnsOnly<T>)
       : writer_(writer), topic_(topic), serialised_(serialised) {}
-  /// Streams are looked up by a small index the caller keeps (a segment), so a sample costs no string work. In a
-  /// columns-only topic every sample of one index must have the texts of its first (FusionPipeline's outputs have
-  /// their segment's or joint's, from the body), which the stream's attributes hold.
   /// Room for `rows` more samples of the stream `index` will have, so that appending them copies no buffer
   /// (effective once the stream exists, i.e. from its first sample on; before, it is noted for then).
   void reserve(std::size_t index, std::size_t rows) {
@@ -40,6 +37,9 @@ class TopicOutput {
     if (index >= streams_.size() || !streams_[index]) return std::nullopt;
     return streams_[index]->id;
   }
+  /// Streams are looked up by a small index the caller keeps (a segment), so a sample costs no string work. In a
+  /// columns-only topic every sample of one index must have the texts of its first (FusionPipeline's outputs have
+  /// their segment's or joint's, from the body), which the stream's attributes hold.
   void write(std::size_t index, const T& sample, std::uint64_t arrival_ns) {
     if (index >= streams_.size()) streams_.resize(index + 1);
     auto& s = streams_[index];

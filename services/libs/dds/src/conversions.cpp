@@ -4,19 +4,23 @@
 
 namespace bsn::dds {
 namespace {
-fusion::Vec3 vec(const std::array<double, 3>& a) { return {a[0], a[1], a[2]}; }
 std::array<double, 3> arr(const fusion::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 }  // namespace
 
 fusion::ImuSample to_imu_sample(const bsn::RawSample& raw) {
+  return to_imu_sample(raw.timestamp_ns(), raw.acc().data(), raw.gyr().data(), raw.mag().data(), raw.channels());
+}
+
+fusion::ImuSample to_imu_sample(std::uint64_t timestamp_ns, const double* acc, const double* gyr, const double* mag,
+                                std::uint32_t channels) {
   fusion::ImuSample s;
-  s.timestamp_ns = raw.timestamp_ns();
-  s.acc = vec(raw.acc());
-  s.gyr = vec(raw.gyr());
-  s.mag = vec(raw.mag());
-  s.has_acc = (raw.channels() & bsn::CHANNEL_ACC) != 0;
-  s.has_gyr = (raw.channels() & bsn::CHANNEL_GYR) != 0;
-  s.has_mag = (raw.channels() & bsn::CHANNEL_MAG) != 0;
+  s.timestamp_ns = timestamp_ns;
+  s.acc = fusion::Vec3(acc[0], acc[1], acc[2]);
+  s.gyr = fusion::Vec3(gyr[0], gyr[1], gyr[2]);
+  s.mag = fusion::Vec3(mag[0], mag[1], mag[2]);
+  s.has_acc = (channels & bsn::CHANNEL_ACC) != 0;
+  s.has_gyr = (channels & bsn::CHANNEL_GYR) != 0;
+  s.has_mag = (channels & bsn::CHANNEL_MAG) != 0;
   return s;
 }
 

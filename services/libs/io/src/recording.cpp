@@ -24,7 +24,7 @@ fusion::ImuSample Recording::sample(std::size_t i) const {
   s.gyr = gyr.row(r).transpose();
   s.acc = acc.row(r).transpose();
   s.mag = mag.row(r).transpose();
-  s.has_mag = !s.mag.array().isNaN().all();
+  s.has_mag = has_mag(i);
   return s;
 }
 

@@ -9,6 +9,10 @@
 namespace bsn::dds {
 
 fusion::ImuSample to_imu_sample(const bsn::RawSample& raw);
+/// The same from a raw sample's fields held elsewhere (acc, gyr, mag: three values each; channels: CHANNEL_* bits), as
+/// `bsn process` keeps its input: the offline fusion takes its samples exactly as the live one does.
+fusion::ImuSample to_imu_sample(std::uint64_t timestamp_ns, const double* acc, const double* gyr, const double* mag,
+                                std::uint32_t channels);
 
 /// Fills a raw sample from an ImuSample (channels from its has_* flags).
 void fill_raw_sample(const fusion::ImuSample& s, bsn::RawSample& raw);

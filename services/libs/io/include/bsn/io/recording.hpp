@@ -43,7 +43,9 @@ struct Recording {
   std::size_t size() const { return static_cast<std::size_t>(gyr.rows()); }
   /// Timestamp of sample i: the recorded one, or i / sampling_rate_hz.
   std::uint64_t time_ns(std::size_t i) const;
-  /// Sample i as the filters take it (a NaN magnetometer row gives has_mag = false).
+  /// Whether sample i has a magnetometer reading: a row of three NaN means none (a slower magnetometer).
+  bool has_mag(std::size_t i) const { return !mag.row(static_cast<Eigen::Index>(i)).array().isNaN().all(); }
+  /// Sample i as the filters take it (has_mag(i) as above).
   fusion::ImuSample sample(std::size_t i) const;
   /// Throws IoError naming `source` if the sizes disagree or the rate is not positive.
   void validate(const std::string& source) const;
