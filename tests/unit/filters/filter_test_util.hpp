@@ -13,6 +13,7 @@
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/sim/magnetic_environment.hpp"
 #include "bsn/sim/scenario.hpp"
+#include "bsn/sim/sensor_model.hpp"
 
 namespace bsn::fusion::filter_test {
 
@@ -28,6 +29,43 @@ struct SampleTime {
 };
 inline SampleTime at_s(double seconds) { return {seconds_to_ns(seconds)}; }
 constexpr SampleTime at_ns(std::uint64_t ns) { return {ns}; }
+
+/// consumer_mems with its magnetometer calibrated: bsn calibrate removes hard and soft iron, and what it leaves is far
+/// below the field.
+inline sim::SensorErrors calibrated_consumer_mems() {
+  sim::SensorErrors e = *sim::sensor_preset("consumer_mems");
+  e.mag.hard_iron = Vec3::Zero();
+  e.mag.soft_iron = sim::Mat3::Identity();
+  return e;
+}
+
+/// The same with its magnetometer reading one IMU sample behind the gyro's and low-passed at 25 Hz (a part sampled
+/// at 100 Hz averages internally well below its 50 Hz Nyquist limit). No dropped samples: a drop is a gap, another
+/// case.
+inline sim::SensorErrors consumer_mems_lagging_magnetometer() {
+  sim::SensorErrors e = calibrated_consumer_mems();
+  e.mag_rate_hz = 0.0;
+  e.mag_delay_samples = 1;
+  e.mag_bandwidth_hz = 25.0;
+  e.drop_probability = 0.0;
+  return e;
+}
+
+/// Nez et al. 2018's random motion of `intensity` (their Table 1) at their 128 Hz, `duration_s` long: at rest for the
+/// first 10 s, then moving (1 s ramp) until `moving_until_s`, measured by `sensors`.
+inline sim::ScenarioSpec nez_random_motion(sim::Intensity intensity, std::uint64_t seed, double duration_s,
+                                           double moving_until_s, const sim::SensorErrors& sensors) {
+  sim::ScenarioSpec spec;
+  spec.name = "Nez random motion";
+  spec.duration_s = duration_s;
+  spec.rate_hz = 128.0;
+  spec.seed = seed;
+  sim::RandomMotion m = sim::random_motion_for(intensity, seed);
+  m.active = {{10.0, moving_until_s, 1.0}};
+  spec.free_motion.random = m;
+  spec.sensors = sensors;
+  return spec;
+}
 
 /// Angle wrapped to [-pi, pi].
 inline double wrap(double angle) { return std::remainder(angle, 2 * std::numbers::pi); }

@@ -22,6 +22,7 @@
 #include "bsn/fusion/rotation.hpp"
 #include "bsn/sim/scenario.hpp"
 #include "bsn/sim/sensor_model.hpp"
+#include "filter_test_util.hpp"
 
 namespace bsn::fusion {
 
@@ -35,20 +36,6 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 // (3 deg at tau_mag 4 s): that would measure the start, not the motion. Scoring starts with the motion.
 constexpr double kRestS = 8.0;
 constexpr double kStartupS = kRestS;
-
-// consumer_mems with the magnetometer calibrated (bsn calibrate removes hard and soft iron; what it leaves is far
-// below the field), its reading one IMU sample behind the gyro's and low-passed at 25 Hz (a part sampled at 100 Hz
-// averages internally well below its 50 Hz Nyquist limit). No dropped samples: a drop is a gap, not this case.
-sim::SensorErrors consumer_mems_lagging_magnetometer() {
-  sim::SensorErrors e = *sim::sensor_preset("consumer_mems");
-  e.mag.hard_iron = Vec3::Zero();
-  e.mag.soft_iron = sim::Mat3::Identity();
-  e.mag_rate_hz = 0.0;
-  e.mag_delay_samples = 1;
-  e.mag_bandwidth_hz = 25.0;
-  e.drop_probability = 0.0;
-  return e;
-}
 
 struct RunFigures {
   double mag_accepted_fraction = 0.0;  ///< of the scored samples with a magnetometer reading
@@ -107,7 +94,7 @@ sim::ScenarioSpec fast_rotation() {
   m.active = {{kRestS - 1.0, 1e9, 1.0}};  // ramped in over 1 s
   m.seed = 12;
   spec.free_motion.random = m;
-  spec.sensors = consumer_mems_lagging_magnetometer();
+  spec.sensors = filter_test::consumer_mems_lagging_magnetometer();
   return spec;
 }
 
@@ -134,7 +121,7 @@ sim::ScenarioSpec translation(std::uint64_t seed = 13, double rest_s = kRestS) {
     spec.free_motion.moves.push_back({d, t, kDuration});
     spec.free_motion.moves.push_back({-d, t + kDuration, kDuration});
   }
-  spec.sensors = consumer_mems_lagging_magnetometer();
+  spec.sensors = filter_test::consumer_mems_lagging_magnetometer();
   return spec;
 }
 
@@ -293,15 +280,8 @@ class SustainedMotion : public ::testing::TestWithParam<FilterInfo> {};
 
 TEST_P(SustainedMotion, StrongAccelerationNeverTiltsWorseThanTheGyroIntegral) {
   for (const std::uint64_t seed : {9, 10, 12}) {
-    sim::ScenarioSpec spec;
-    spec.name = "Nez fast intensity";
-    spec.duration_s = 610.0;
-    spec.rate_hz = 128.0;
-    spec.seed = seed;
-    sim::RandomMotion m = sim::random_motion_for(sim::Intensity::kFast, seed);
-    m.active = {{10.0, 1e9, 1.0}};
-    spec.free_motion.random = m;
-    spec.sensors = *sim::sensor_preset("opal");
+    const sim::ScenarioSpec spec =
+        filter_test::nez_random_motion(sim::Intensity::kFast, seed, 610.0, 1e9, *sim::sensor_preset("opal"));
     auto filter = GetParam().make({GetParam().name, {}});
     sim::ScenarioRunner runner(spec, {}, false);
     std::vector<sim::ScenarioSample> out;

@@ -255,17 +255,8 @@ TEST(SeelRuppin, AShorterTiltStageTiltsBetterWhileGyroErrorsTurnTheInertialFrame
                                 SeelRuppinFilter::Params{}.zeta / SeelRuppinFilter::Params{}.tau_acc_s);
   double default_sq = 0.0, longer_sq = 0.0, scored = 0.0;
   for (const std::uint64_t seed : {9, 21, 33}) {
-    sim::ScenarioSpec spec;
-    spec.name = "Nez intermediate intensity, consumer MEMS";
-    spec.duration_s = 190.0;
-    spec.rate_hz = 128.0;
-    spec.seed = seed;
-    sim::RandomMotion motion = sim::random_motion_for(sim::Intensity::kIntermediate, seed);
-    motion.active = {{10.0, 188.0, 1.0}};
-    spec.free_motion.random = motion;
-    spec.sensors = *sim::sensor_preset("consumer_mems");
-    spec.sensors.mag.hard_iron = Vec3::Zero();  // a calibrated magnetometer: the heading is not the question
-    spec.sensors.mag.soft_iron = sim::Mat3::Identity();
+    const sim::ScenarioSpec spec = filter_test::nez_random_motion(sim::Intensity::kIntermediate, seed, 190.0, 188.0,
+                                                                  filter_test::calibrated_consumer_mems());
     SeelRuppinFilter default_stage(SeelRuppinFilter::Params{}), longer(longer_stage);
     sim::ScenarioRunner runner(spec, {}, false);
     std::vector<sim::ScenarioSample> out;

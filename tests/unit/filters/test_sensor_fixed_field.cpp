@@ -16,25 +16,13 @@
 #include "bsn/fusion/sensor_fixed_field.hpp"
 #include "bsn/sim/scenario.hpp"
 #include "bsn/sim/sensor_model.hpp"
+#include "filter_test_util.hpp"
 
 namespace bsn::fusion {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr double kRestS = 8.0;
-
-// consumer_mems with the magnetometer calibrated (what bsn calibrate leaves), its reading one sample behind the gyro
-// and low-passed at 25 Hz, no dropped samples.
-sim::SensorErrors consumer_sensor() {
-  sim::SensorErrors e = *sim::sensor_preset("consumer_mems");
-  e.mag.hard_iron = Vec3::Zero();
-  e.mag.soft_iron = sim::Mat3::Identity();
-  e.mag_rate_hz = 0.0;
-  e.mag_delay_samples = 1;
-  e.mag_bandwidth_hz = 25.0;
-  e.drop_probability = 0.0;
-  return e;
-}
 
 // A hand-held sensor, still for kRestS, then turned in every direction (RMS 60 deg/s, 0.1-0.5 Hz: tens of degrees
 // about each axis); with `carried`, also carried about the room meanwhile: moved by 1.5 m and back along changing
@@ -62,7 +50,7 @@ sim::ScenarioSpec hand_held(std::uint64_t seed, bool carried, double duration_s 
       spec.free_motion.moves.push_back({-d, t + kDuration, kDuration});
     }
   }
-  spec.sensors = consumer_sensor();
+  spec.sensors = filter_test::consumer_mems_lagging_magnetometer();
   return spec;
 }
 
