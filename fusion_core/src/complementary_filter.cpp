@@ -55,9 +55,9 @@ ComplementaryFilter::ComplementaryFilter(const Params& params) : FilterBase(kNam
   require_positive(kName, params.tau_acc_s, "tau_acc_s");
   require_positive(kName, params.tau_mag_s, "tau_mag_s");
   require_non_negative(kName, params.acc_rejection_m_s2, "acc_rejection_m_s2");
-  require_switch(kName, params.mag_rejection, "mag_rejection");
+  params.MagRejectionParams::check(kName);
   require_positive(kName, params.max_acc_error_rad, "max_acc_error_rad");
-  require_switch(kName, params.gyro_bias_lowpass, "gyro_bias_lowpass");
+  params.GyroBiasRemovalParams::check(kName);
   params.RestDetector::Params::check(kName);
   coeff_.inv_tau_acc = 1.0 / params.tau_acc_s;
   coeff_.inv_tau_mag = 1.0 / params.tau_mag_s;

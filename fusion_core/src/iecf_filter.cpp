@@ -35,8 +35,8 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.gain, "gain");
   require_positive(name, p.initial_gain, "initial_gain");
-  require_switch(name, p.gyro_bias_lowpass, "gyro_bias_lowpass");
-  require_switch(name, p.mag_rejection, "mag_rejection");
+  p.GyroBiasRemovalParams::check(name);
+  p.MagRejectionParams::check(name);
   return p;
 }
 

@@ -19,7 +19,7 @@ constexpr auto kParams = join_param_fields(std::to_array<ParamField<P>>({
 
 const P& checked(const P& p, std::string_view name) {
   require_positive(name, p.beta, "beta");
-  require_switch(name, p.gyro_bias_lowpass, "gyro_bias_lowpass");
+  p.GyroBiasRemovalParams::check(name);
   return p;
 }
 }  // namespace

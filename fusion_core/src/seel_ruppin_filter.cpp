@@ -39,7 +39,7 @@ const P& checked(const P& p, const char* name) {
   require_positive(name, p.max_acc_error_rad, "max_acc_error_rad");
   require_non_negative(name, p.acc_lowpass_tau_s, "acc_lowpass_tau_s");
   require_positive(name, p.mag_reference_s, "mag_reference_s");
-  require_switch(name, p.mag_rejection, "mag_rejection");
+  p.MagRejectionParams::check(name);
   require_switch(name, p.rest_bias_lowpass, "rest_bias_lowpass");
   return p;
 }

@@ -15,6 +15,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <string_view>
 
 #include "bsn/fusion/filter_params.hpp"
 #include "bsn/fusion/rotation.hpp"
@@ -108,6 +109,8 @@ struct GyroBiasRemovalParams : GyroBiasLowPass::Params {
   /// filter). Default 1: a consumer gyro's bias of 0.5 deg/s otherwise leaves a standing error of the bias times the
   /// filter's correction time constant.
   double gyro_bias_lowpass = 1.0;
+
+  void check(std::string_view owner) const { require_switch(owner, gyro_bias_lowpass, "gyro_bias_lowpass"); }
 };
 
 }  // namespace bsn::fusion
